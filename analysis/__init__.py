@@ -1,0 +1,1 @@
+"""coral analysis package."""

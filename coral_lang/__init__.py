@@ -1,0 +1,1 @@
+"""The CORAL language: mission text to a Petri net, checked against a vehicle profile."""

@@ -1,0 +1,327 @@
+"""The one model of a Petri net that every stage of coral shares.
+
+A `Net` is a place/transition net with weighted arcs, an initial marking, declared
+final markings, and a source map from every element back to the text that made it.
+Missions compile to it, PNML imports to it, analysis explores it, the engine runs it.
+
+Mission semantics (see ``docs/language.md``): a transition with an ``action`` leaves
+one token in a *pending* place of its own; each reply kind the vehicle can give is a
+*reply* transition that takes that token and marks the place the mission maps the
+reply to. Capacities are compiled away into complement places, so the `Net` itself is
+a plain P/T net and every analysis applies unchanged.
+"""
+
+from __future__ import annotations
+
+import enum
+import hashlib
+import json
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+from coral_lang.diagnostics import CoralError, Span
+
+
+class PlaceKind(enum.Enum):
+    """What a place stands for; analyses and reports treat the kinds differently."""
+
+    MISSION = "mission"  # declared by the mission author (or any PNML place)
+    PENDING = "pending"  # a command is in flight, awaiting the vehicle's reply
+    COMPLEMENT = "complement"  # free room of a capacity-bounded place
+
+
+class TransitionKind(enum.Enum):
+    """Who fires a transition: the engine (plain, command) or the vehicle (reply)."""
+
+    PLAIN = "plain"  # wait/signal only
+    COMMAND = "command"  # sends a vehicle command, marks its pending place
+    REPLY = "reply"  # the vehicle answered; an environment transition for analysis
+
+
+Value = float | int | str
+
+
+@dataclass(frozen=True)
+class Command:
+    """A vehicle command as the engine sends it: ``SYSTEM(NAME, param=value, ...)``."""
+
+    system: str
+    name: str
+    params: tuple[tuple[str, Value], ...]
+    resources: tuple[str, ...] = ()
+    replies: tuple[str, ...] = ()
+
+    def header(self) -> str:
+        """The command as a mission author would write it, e.g. ``ROMEO(DEPTH, z = 2.0)``."""
+        args = "".join(f", {name} = {_format_value(value)}" for name, value in self.params)
+        return f"{self.system}({self.name}{args})"
+
+
+def _format_value(value: Value) -> str:
+    if isinstance(value, str):
+        return json.dumps(value)
+    return repr(value)
+
+
+@dataclass(frozen=True)
+class Place:
+    """A place; ``pending_of`` names the command transition for a PENDING place,
+    ``complement_of`` the bounded place for a COMPLEMENT one."""
+
+    name: str
+    initial: int = 0
+    kind: PlaceKind = PlaceKind.MISSION
+    capacity: int | None = None
+    label: str = ""
+    span: Span | None = None
+    resources: tuple[str, ...] = ()
+    pending_of: str | None = None
+    complement_of: str | None = None
+
+
+@dataclass(frozen=True)
+class Transition:
+    """A transition; ``inputs``/``outputs`` map place names to arc weights (all > 0).
+
+    A COMMAND transition carries its `Command` and its ``pending`` place; a REPLY
+    transition names the command transition it answers (``reply_to``) and the reply
+    kind (``reply``, e.g. ``"timeout"``).
+    """
+
+    name: str
+    inputs: tuple[tuple[str, int], ...]
+    outputs: tuple[tuple[str, int], ...]
+    kind: TransitionKind = TransitionKind.PLAIN
+    priority: int = 0
+    label: str = ""
+    span: Span | None = None
+    command: Command | None = None
+    pending: str | None = None
+    reply_to: str | None = None
+    reply: str | None = None
+
+    def describe(self) -> str:
+        """One line a person understands, e.g. ``check_depth: DEPTH? replied timeout``."""
+        if self.kind is TransitionKind.REPLY and self.reply_to is not None:
+            return f"{self.reply_to}: {self.label or '?'} replied {self.reply}"
+        if self.command is not None:
+            return f"{self.name}: sends {self.command.header()}"
+        return self.label or self.name
+
+
+@dataclass(frozen=True)
+class FinalMarking:
+    """A declared proper end: exactly ``tokens`` in those places, every other
+    non-complement place empty."""
+
+    tokens: tuple[tuple[str, int], ...]
+    span: Span | None = None
+
+
+class AssertKind(enum.Enum):
+    """The user properties a mission can state."""
+
+    NEVER = "never"  # never all these places marked together
+    REACHABLE = "reachable"  # some reachable marking has at least these tokens
+    BOUND = "bound"  # the place never holds more than `bound` tokens
+
+
+@dataclass(frozen=True)
+class Assertion:
+    """A property written in the mission with ``assert``."""
+
+    kind: AssertKind
+    places: tuple[tuple[str, int], ...]
+    bound: int | None = None
+    span: Span | None = None
+
+    def describe(self) -> str:
+        """The assertion in the mission's own syntax."""
+        body = ", ".join(p if w == 1 else f"{p}*{w}" for p, w in self.places)
+        if self.kind is AssertKind.BOUND:
+            return f"assert bound {body} <= {self.bound}"
+        return f"assert {self.kind.value} {{ {body} }}"
+
+
+class NetError(CoralError, ValueError):
+    """A `Net` was built inconsistently: an arc to an unknown place, a weight below 1,
+    a duplicate name. Raised by `Net` itself; front ends report such faults earlier."""
+
+
+@dataclass(frozen=True)
+class Net:
+    """A place/transition net plus what missions add: finals, assertions, source map."""
+
+    name: str
+    places: tuple[Place, ...]
+    transitions: tuple[Transition, ...]
+    finals: tuple[FinalMarking, ...] = ()
+    assertions: tuple[Assertion, ...] = ()
+    vehicle: str | None = None
+    sources: tuple[str, ...] = ()
+    _place_index: Mapping[str, int] = field(init=False, repr=False, compare=False)
+    _transition_index: Mapping[str, int] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        place_index: dict[str, int] = {}
+        for i, place in enumerate(self.places):
+            if place.name in place_index:
+                raise NetError(f"duplicate place '{place.name}'")
+            if place.initial < 0:
+                raise NetError(f"place '{place.name}' has negative initial marking")
+            place_index[place.name] = i
+        transition_index: dict[str, int] = {}
+        for i, tr in enumerate(self.transitions):
+            if tr.name in transition_index:
+                raise NetError(f"duplicate transition '{tr.name}'")
+            transition_index[tr.name] = i
+            for place_name, weight in (*tr.inputs, *tr.outputs):
+                if place_name not in place_index:
+                    raise NetError(f"transition '{tr.name}' has an arc to unknown place '{place_name}'")
+                if weight < 1:
+                    raise NetError(f"transition '{tr.name}' has an arc of weight {weight}")
+        for final in self.finals:
+            for place_name, _ in final.tokens:
+                if place_name not in place_index:
+                    raise NetError(f"final marking names unknown place '{place_name}'")
+        object.__setattr__(self, "_place_index", MappingProxyType(place_index))
+        object.__setattr__(self, "_transition_index", MappingProxyType(transition_index))
+
+    # -- lookup -------------------------------------------------------------------------
+
+    def place(self, name: str) -> Place:
+        """The place called ``name``; KeyError if there is none."""
+        return self.places[self._place_index[name]]
+
+    def transition(self, name: str) -> Transition:
+        """The transition called ``name``; KeyError if there is none."""
+        return self.transitions[self._transition_index[name]]
+
+    def place_index(self, name: str) -> int:
+        """Position of place ``name`` in `places` (the column order of markings)."""
+        return self._place_index[name]
+
+    def transition_index(self, name: str) -> int:
+        """Position of transition ``name`` in `transitions`."""
+        return self._transition_index[name]
+
+    @property
+    def place_names(self) -> tuple[str, ...]:
+        """Place names in marking order."""
+        return tuple(p.name for p in self.places)
+
+    # -- markings -----------------------------------------------------------------------
+
+    def initial_marking(self) -> tuple[int, ...]:
+        """The initial marking as a tuple aligned with `places`."""
+        return tuple(p.initial for p in self.places)
+
+    def marking_from(self, tokens: Mapping[str, int] | Iterable[tuple[str, int]]) -> tuple[int, ...]:
+        """A full marking from a partial one (unnamed places get 0)."""
+        values = [0] * len(self.places)
+        items = tokens.items() if isinstance(tokens, Mapping) else tokens
+        for name, count in items:
+            values[self._place_index[name]] = count
+        return tuple(values)
+
+    def marking_dict(self, marking: Iterable[int]) -> dict[str, int]:
+        """The marked places of ``marking`` as ``{name: tokens}`` (zeros left out)."""
+        return {p.name: m for p, m in zip(self.places, marking, strict=True) if m}
+
+    def final_markings(self) -> list[tuple[int, ...]]:
+        """Declared finals as full markings; complement places hold their free room."""
+        result = []
+        for final in self.finals:
+            values = list(self.marking_from(final.tokens))
+            for i, place in enumerate(self.places):
+                if place.kind is PlaceKind.COMPLEMENT and place.complement_of is not None:
+                    base = self.place(place.complement_of)
+                    assert base.capacity is not None
+                    values[i] = base.capacity - values[self._place_index[base.name]]
+            result.append(tuple(values))
+        return result
+
+    def is_final(self, marking: Iterable[int]) -> bool:
+        """Whether ``marking`` is one of the declared final markings."""
+        return tuple(marking) in set(self.final_markings())
+
+    def enabled(self, marking: tuple[int, ...], transition: Transition) -> bool:
+        """Whether ``transition`` may fire in ``marking`` (the reference rule)."""
+        return all(marking[self._place_index[p]] >= w for p, w in transition.inputs)
+
+    def fire(self, marking: tuple[int, ...], transition: Transition) -> tuple[int, ...]:
+        """The marking after firing ``transition``; the caller checks it is enabled."""
+        values = list(marking)
+        for p, w in transition.inputs:
+            values[self._place_index[p]] -= w
+        for p, w in transition.outputs:
+            values[self._place_index[p]] += w
+        return tuple(values)
+
+    # -- provenance -----------------------------------------------------------------------
+
+    def source_map(self) -> dict[str, Span]:
+        """Every element that came from source text, keyed ``place:NAME`` or
+        ``transition:NAME``, mapped to the span that made it."""
+        spans: dict[str, Span] = {}
+        for place in self.places:
+            if place.span is not None:
+                spans[f"place:{place.name}"] = place.span
+        for tr in self.transitions:
+            if tr.span is not None:
+                spans[f"transition:{tr.name}"] = tr.span
+        return spans
+
+    def canonical(self) -> dict[str, object]:
+        """The net's meaning without its source positions: what the digest covers.
+
+        Two nets with the same canonical form behave identically on the vehicle, so a
+        comment or a reformatting does not invalidate a verification certificate, while
+        any change to a place, arc, priority, command parameter or final marking does.
+        """
+        return {
+            "name": self.name,
+            "vehicle": self.vehicle,
+            "places": [
+                [p.name, p.initial, p.kind.value, p.capacity, list(p.resources), p.pending_of,
+                 p.complement_of]
+                for p in sorted(self.places, key=lambda p: p.name)
+            ],
+            "transitions": [
+                {
+                    "name": t.name,
+                    "kind": t.kind.value,
+                    "priority": t.priority,
+                    "inputs": sorted([p, w] for p, w in t.inputs),
+                    "outputs": sorted([p, w] for p, w in t.outputs),
+                    "command": None
+                    if t.command is None
+                    else [t.command.system, t.command.name,
+                          [[n, v] for n, v in t.command.params], list(t.command.resources),
+                          list(t.command.replies)],
+                    "pending": t.pending,
+                    "reply_to": t.reply_to,
+                    "reply": t.reply,
+                }
+                for t in sorted(self.transitions, key=lambda t: t.name)
+            ],
+            "finals": sorted(sorted([p, w] for p, w in f.tokens) for f in self.finals),
+            "assertions": sorted(
+                [a.kind.value, sorted([p, w] for p, w in a.places), a.bound] for a in self.assertions
+            ),
+        }
+
+    def digest(self) -> str:
+        """SHA-256 of the canonical form: ``sha256:<hex>``. Stable across runs and
+        platforms, independent of declaration order and source positions."""
+        blob = json.dumps(self.canonical(), sort_keys=True, separators=(",", ":"))
+        return "sha256:" + hashlib.sha256(blob.encode()).hexdigest()
+
+    def summary(self) -> str:
+        """One line: name and element counts."""
+        arcs = sum(len(t.inputs) + len(t.outputs) for t in self.transitions)
+        return (
+            f"net '{self.name}': {len(self.places)} places, {len(self.transitions)} transitions, "
+            f"{arcs} arcs, {len(self.finals)} final markings"
+        )

@@ -1,0 +1,342 @@
+"""Vehicle profiles: the only vehicle-specific part of coral.
+
+A profile (YAML) lists the commands a vehicle accepts, their parameters (name, type,
+unit, range), the reply kinds each can produce, the vehicle resources each drives, a
+nominal duration, and for space-trap queries the tracking criterion. The schema is
+documented in ``docs/profiles.md``; ROMEO's profile (Table 1 of the paper) is bundled.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from importlib import resources as importlib_resources
+from pathlib import Path
+from typing import Literal, cast
+
+from coral_lang import units
+from coral_lang.diagnostics import ProfileError, did_you_mean
+from coral_lang.yamlsource import Plain, YamlDocument, expect_keys, load_yaml
+
+ParamType = Literal["float", "int", "string"]
+CommandKind = Literal["task", "query", "action"]
+PARAM_TYPES: tuple[str, ...] = ("float", "int", "string")
+COMMAND_KINDS: tuple[str, ...] = ("task", "query", "action")
+TIME_OUT = "time_out"
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter of a command. ``minimum``/``maximum`` are inclusive, in ``unit``."""
+
+    name: str
+    type: ParamType
+    unit: str | None = None
+    minimum: float | None = None
+    maximum: float | None = None
+    description: str = ""
+
+    def describe(self) -> str:
+        """E.g. ``z: float [m] in [0, 500]``."""
+        text = f"{self.name}: {self.type}"
+        if self.unit:
+            text += f" [{self.unit}]"
+        if self.minimum is not None or self.maximum is not None:
+            low = "-inf" if self.minimum is None else f"{self.minimum:g}"
+            high = "inf" if self.maximum is None else f"{self.maximum:g}"
+            text += f" in [{low}, {high}]"
+        return text
+
+
+@dataclass(frozen=True)
+class SpaceTrap:
+    """The paper's tracking criterion for a query: the signal tracks its reference
+    "of order n" when every derivative k <= n stayed within ``eps[k]`` over the last
+    ``window_s`` seconds."""
+
+    signal: str
+    order: int
+    eps: tuple[float, ...]
+    window_s: float
+
+
+@dataclass(frozen=True)
+class CommandSpec:
+    """A command of the vehicle, as the profile declares it."""
+
+    name: str
+    kind: CommandKind
+    params: tuple[ParamSpec, ...]
+    replies: tuple[str, ...]
+    reply_meanings: tuple[tuple[str, str], ...]
+    resources: tuple[str, ...]
+    duration_s: float
+    description: str = ""
+    space_trap: SpaceTrap | None = None
+
+    def param(self, name: str) -> ParamSpec | None:
+        """The parameter called ``name``, or None."""
+        return next((p for p in self.params if p.name == name), None)
+
+    def signature(self) -> str:
+        """E.g. ``DEPTH?(z, time_out) -> done | timeout``."""
+        return f"{self.name}({', '.join(p.name for p in self.params)}) -> {' | '.join(self.replies)}"
+
+
+@dataclass(frozen=True)
+class VehicleProfile:
+    """Everything coral knows about one vehicle's command interface."""
+
+    name: str
+    description: str
+    resources: tuple[str, ...]
+    commands: tuple[CommandSpec, ...]
+    file: str
+
+    def command(self, name: str) -> CommandSpec | None:
+        """The command called ``name``, or None."""
+        return next((c for c in self.commands if c.name == name), None)
+
+    @property
+    def command_names(self) -> tuple[str, ...]:
+        """Command names in profile order."""
+        return tuple(c.name for c in self.commands)
+
+
+def bundled_profile_path(system: str) -> Path | None:
+    """Path of the bundled profile for ``system`` (``ROMEO`` -> ``romeo.yaml``), if any."""
+    candidate = importlib_resources.files("coral_lang") / "profiles" / f"{system.lower()}.yaml"
+    path = Path(str(candidate))
+    return path if path.is_file() else None
+
+
+def bundled_profiles() -> list[str]:
+    """Names of the vehicles whose profiles ship with coral."""
+    folder = Path(str(importlib_resources.files("coral_lang") / "profiles"))
+    return sorted(p.stem.upper() for p in folder.glob("*.yaml"))
+
+
+def load_profile(path: str | Path) -> VehicleProfile:
+    """Load and validate a profile file.
+
+    Raises:
+        ProfileError: unreadable file, invalid YAML, or a field that breaks the schema;
+            the message names the file, line, column and YAML path of the field.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ProfileError(str(path), "", f"cannot read profile: {exc}") from None
+    return parse_profile(text, str(path))
+
+
+def load_bundled_profile(system: str) -> VehicleProfile:
+    """Load the bundled profile for ``system``; ProfileError if there is none."""
+    path = bundled_profile_path(system)
+    if path is None:
+        known = ", ".join(bundled_profiles())
+        raise ProfileError(system, "", f"no bundled profile for vehicle '{system}' (bundled: {known})")
+    return load_profile(path)
+
+
+def parse_profile(text: str, file: str = "<profile>") -> VehicleProfile:
+    """Validate profile YAML ``text`` into a `VehicleProfile`."""
+    doc = load_yaml(text, file)
+    root = _mapping(doc, doc.data, "")
+    expect_keys(doc, root, "", ["vehicle", "commands"], ["description", "resources", "version"])
+    name = _string(doc, root["vehicle"], "vehicle")
+    if not name.isidentifier():
+        raise doc.error("vehicle", f"vehicle name '{name}' must be an identifier (letters, digits, _)")
+    resources = tuple(_string_list(doc, root.get("resources", []), "resources"))
+    commands_node = _mapping(doc, root["commands"], "commands")
+    if not commands_node:
+        raise doc.error("commands", "a profile must declare at least one command")
+    commands = tuple(
+        _command(doc, command_name, spec, f"commands.{command_name}", resources)
+        for command_name, spec in commands_node.items()
+    )
+    return VehicleProfile(
+        name=name,
+        description=_string(doc, root.get("description", ""), "description"),
+        resources=resources,
+        commands=commands,
+        file=file,
+    )
+
+
+def _command(
+    doc: YamlDocument, name: str, node: Plain, path: str, resources: tuple[str, ...]
+) -> CommandSpec:
+    if not (name.rstrip("?").isidentifier() and name.count("?") <= 1):
+        raise doc.error(path, f"command name '{name}' must be an identifier, optionally ending in '?'")
+    spec = _mapping(doc, node, path)
+    expect_keys(
+        doc, spec, path, ["kind", "replies"],
+        ["params", "resources", "duration_s", "description", "space_trap"],
+    )
+    kind = _string(doc, spec["kind"], f"{path}.kind")
+    if kind not in COMMAND_KINDS:
+        raise doc.error(f"{path}.kind", f"kind must be one of {', '.join(COMMAND_KINDS)}, not '{kind}'")
+    params = tuple(
+        _param(doc, p, f"{path}.params[{i}]") for i, p in enumerate(_list(doc, spec.get("params", []), f"{path}.params"))
+    )
+    seen: set[str] = set()
+    for i, param in enumerate(params):
+        if param.name in seen:
+            raise doc.error(f"{path}.params[{i}].name", f"parameter '{param.name}' declared twice")
+        seen.add(param.name)
+    replies, meanings = _replies(doc, spec["replies"], f"{path}.replies")
+    used = tuple(_string_list(doc, spec.get("resources", []), f"{path}.resources"))
+    for i, resource in enumerate(used):
+        if resource not in resources:
+            raise doc.error(
+                f"{path}.resources[{i}]",
+                f"unknown resource '{resource}'{did_you_mean(resource, resources)}; "
+                f"declare it under 'resources' (have: {', '.join(resources) or 'none'})",
+            )
+    duration = _number(doc, spec.get("duration_s", 0.0), f"{path}.duration_s")
+    if duration < 0:
+        raise doc.error(f"{path}.duration_s", "duration must be >= 0 seconds")
+    trap = None
+    if "space_trap" in spec:
+        trap = _space_trap(doc, spec["space_trap"], f"{path}.space_trap")
+    if kind == "query":
+        time_out = next((p for p in params if p.name == TIME_OUT), None)
+        if time_out is None:
+            raise doc.error(f"{path}.params", f"a query must take a '{TIME_OUT}' parameter")
+        if time_out.unit is None or units.dimension(time_out.unit) != "time":
+            raise doc.error(f"{path}.params", f"'{TIME_OUT}' must have a time unit such as s")
+        if "timeout" not in replies:
+            raise doc.error(f"{path}.replies", "a query must be able to reply 'timeout'")
+        if trap is None:
+            raise doc.error(path, "a query must declare its 'space_trap' criterion")
+    elif trap is not None:
+        raise doc.error(f"{path}.space_trap", "only queries (kind: query) have a space_trap")
+    return CommandSpec(
+        name=name,
+        kind=cast(CommandKind, kind),
+        params=params,
+        replies=replies,
+        reply_meanings=meanings,
+        resources=used,
+        duration_s=duration,
+        description=_string(doc, spec.get("description", ""), f"{path}.description"),
+        space_trap=trap,
+    )
+
+
+def _param(doc: YamlDocument, node: Plain, path: str) -> ParamSpec:
+    spec = _mapping(doc, node, path)
+    expect_keys(doc, spec, path, ["name", "type"], ["unit", "min", "max", "description"])
+    name = _string(doc, spec["name"], f"{path}.name")
+    if not name.isidentifier():
+        raise doc.error(f"{path}.name", f"parameter name '{name}' must be an identifier")
+    type_ = _string(doc, spec["type"], f"{path}.type")
+    if type_ not in PARAM_TYPES:
+        raise doc.error(f"{path}.type", f"type must be one of {', '.join(PARAM_TYPES)}, not '{type_}'")
+    unit = None
+    if spec.get("unit") is not None:
+        unit = _string(doc, spec["unit"], f"{path}.unit")
+        if not units.is_unit(unit):
+            raise doc.error(f"{path}.unit", f"unknown unit '{unit}'{did_you_mean(unit, units.UNITS)}")
+        if type_ == "string":
+            raise doc.error(f"{path}.unit", "a string parameter has no unit")
+    minimum = _number(doc, spec["min"], f"{path}.min") if spec.get("min") is not None else None
+    maximum = _number(doc, spec["max"], f"{path}.max") if spec.get("max") is not None else None
+    if minimum is not None and maximum is not None and minimum > maximum:
+        raise doc.error(f"{path}.min", f"min {minimum:g} is greater than max {maximum:g}")
+    if type_ == "string" and (minimum is not None or maximum is not None):
+        raise doc.error(path, "a string parameter has no range")
+    return ParamSpec(
+        name=name,
+        type=cast(ParamType, type_),
+        unit=unit,
+        minimum=minimum,
+        maximum=maximum,
+        description=_string(doc, spec.get("description", ""), f"{path}.description"),
+    )
+
+
+def _replies(doc: YamlDocument, node: Plain, path: str) -> tuple[tuple[str, ...], tuple[tuple[str, str], ...]]:
+    if isinstance(node, list):
+        names = _string_list(doc, node, path)
+        meanings = [(n, "") for n in names]
+    elif isinstance(node, dict):
+        meanings = [(k, _string(doc, v, f"{path}.{k}")) for k, v in node.items()]
+        names = [k for k, _ in meanings]
+    else:
+        raise doc.error(path, "expected a list of reply kinds or a mapping reply -> meaning")
+    if not names:
+        raise doc.error(path, "a command must produce at least one reply kind")
+    for i, reply in enumerate(names):
+        if not reply.isidentifier():
+            raise doc.error(f"{path}[{i}]", f"reply kind '{reply}' must be an identifier")
+        if reply == "ignore":
+            raise doc.error(f"{path}[{i}]", "'ignore' is reserved for missions that drop a reply")
+    if len(set(names)) != len(names):
+        raise doc.error(path, "a reply kind is listed twice")
+    return tuple(names), tuple(meanings)
+
+
+def _space_trap(doc: YamlDocument, node: Plain, path: str) -> SpaceTrap:
+    spec = _mapping(doc, node, path)
+    expect_keys(doc, spec, path, ["signal", "order", "eps", "window_s"], [])
+    order_value = spec["order"]
+    if not isinstance(order_value, int) or isinstance(order_value, bool) or order_value < 0:
+        raise doc.error(f"{path}.order", "order must be a whole number >= 0")
+    eps = tuple(_number(doc, e, f"{path}.eps[{i}]") for i, e in enumerate(_list(doc, spec["eps"], f"{path}.eps")))
+    if len(eps) != order_value + 1:
+        raise doc.error(f"{path}.eps", f"order {order_value} needs {order_value + 1} tolerances (one per derivative 0..{order_value}), got {len(eps)}")
+    if any(e <= 0 for e in eps):
+        raise doc.error(f"{path}.eps", "every tolerance must be > 0")
+    window = _number(doc, spec["window_s"], f"{path}.window_s")
+    if window <= 0:
+        raise doc.error(f"{path}.window_s", "window_s must be > 0")
+    return SpaceTrap(
+        signal=_string(doc, spec["signal"], f"{path}.signal"), order=order_value, eps=eps, window_s=window
+    )
+
+
+def _mapping(doc: YamlDocument, node: Plain, path: str) -> dict[str, Plain]:
+    if not isinstance(node, dict):
+        raise doc.error(path, f"expected a mapping, got {_kind(node)}")
+    return node
+
+
+def _list(doc: YamlDocument, node: Plain, path: str) -> list[Plain]:
+    if not isinstance(node, list):
+        raise doc.error(path, f"expected a list, got {_kind(node)}")
+    return node
+
+
+def _string(doc: YamlDocument, node: Plain, path: str) -> str:
+    if not isinstance(node, str):
+        raise doc.error(path, f"expected text, got {_kind(node)}")
+    return node
+
+
+def _string_list(doc: YamlDocument, node: Plain, path: str) -> list[str]:
+    return [_string(doc, item, f"{path}[{i}]") for i, item in enumerate(_list(doc, node, path))]
+
+
+def _number(doc: YamlDocument, node: Plain, path: str) -> float:
+    if isinstance(node, bool) or not isinstance(node, int | float):
+        raise doc.error(path, f"expected a number, got {_kind(node)}")
+    if not math.isfinite(node):
+        raise doc.error(path, "expected a finite number")
+    return float(node)
+
+
+def _kind(node: Plain) -> str:
+    if node is None:
+        return "nothing"
+    if isinstance(node, bool):
+        return f"a boolean ({str(node).lower()})"
+    if isinstance(node, dict):
+        return "a mapping"
+    if isinstance(node, list):
+        return "a list"
+    if isinstance(node, str):
+        return f"text ('{node}')"
+    return f"a number ({node})"

@@ -1,0 +1,1 @@
+"""coral romeo_sim package."""

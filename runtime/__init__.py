@@ -1,0 +1,1 @@
+"""coral runtime package."""

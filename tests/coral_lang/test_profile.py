@@ -1,0 +1,111 @@
+"""Vehicle profiles: the bundled ROMEO profile and refusal of bad ones."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from coral_lang.diagnostics import ProfileError
+from coral_lang.profile import load_bundled_profile, load_profile, parse_profile
+
+TABLE_1 = ["DEPTH", "DEPTH?", "HEADING", "HEADING?", "LRM", "XY?", "SRM", "GOTO", "XYPSI?",
+           "DOCKING", "DOCKING?", "FIX_XY", "GET_DOCK"]
+
+
+def test_romeo_profile_has_every_command_of_table_1() -> None:
+    profile = load_bundled_profile("ROMEO")
+    assert profile.name == "ROMEO"
+    for name in [*TABLE_1, "INIT", "SURFACE"]:
+        assert profile.command(name) is not None, name
+
+
+def test_romeo_queries_take_time_out_and_reply_done_or_timeout() -> None:
+    profile = load_bundled_profile("romeo")
+    queries = [c for c in profile.commands if c.name.endswith("?")]
+    assert {q.name for q in queries} >= {"DEPTH?", "HEADING?", "XY?", "XYPSI?", "DOCKING?"}
+    for query in queries:
+        assert query.kind == "query"
+        assert set(query.replies) == {"done", "timeout"}
+        assert query.param("time_out") is not None
+        assert query.space_trap is not None
+
+
+def test_romeo_orders_follow_the_paper() -> None:
+    profile = load_bundled_profile("ROMEO")
+    xy = profile.command("XY?")
+    depth = profile.command("DEPTH?")
+    assert xy is not None and xy.space_trap is not None and xy.space_trap.order == 0
+    assert depth is not None and depth.space_trap is not None and depth.space_trap.order == 1
+
+
+def test_romeo_resources_as_the_language_sketch_gives_them() -> None:
+    profile = load_bundled_profile("ROMEO")
+    expected = {
+        "DEPTH": {"depth"}, "DEPTH?": {"depth"}, "HEADING": {"heading"}, "HEADING?": {"heading"},
+        "LRM": {"horizontal"}, "XY?": {"horizontal"}, "SRM": {"horizontal", "heading"},
+        "GOTO": {"horizontal", "heading"}, "XYPSI?": {"horizontal", "heading"},
+        "DOCKING": {"horizontal", "heading"}, "DOCKING?": {"horizontal"}, "FIX_XY": {"horizontal"},
+    }
+    for name, resources in expected.items():
+        command = profile.command(name)
+        assert command is not None
+        assert set(command.resources) == resources, name
+
+
+GOOD = """
+vehicle: BOT
+resources: [depth]
+commands:
+  DIVE:
+    kind: task
+    params:
+      - {name: z, type: float, unit: m, min: 0, max: 10}
+    replies: [ack, error]
+    resources: [depth]
+"""
+
+BAD_PROFILES = [
+    (GOOD.replace("max: 10", "max: ten"), "commands.DIVE.params[0].max", "expected a number"),
+    (GOOD.replace("type: float", "type: real"), "commands.DIVE.params[0].type", "type must be one of"),
+    (GOOD.replace("resources: [depth]\n    ", "resources: [dpeth]\n    ").replace(
+        "replies: [ack, error]\n    resources: [depth]", "replies: [ack, error]\n    resources: [dpeth]"),
+     "commands.DIVE.resources[0]", "did you mean 'depth'"),
+    (GOOD.replace("kind: task", "kind: query"), "commands.DIVE.params", "time_out"),
+    (GOOD.replace("unit: m", "unit: meters"), "commands.DIVE.params[0].unit", "unknown unit"),
+    (GOOD.replace("min: 0, max: 10", "min: 10, max: 0"), "commands.DIVE.params[0].min", "greater than max"),
+    (GOOD.replace("replies: [ack, error]", "replies: []"), "commands.DIVE.replies", "at least one"),
+    (GOOD.replace("    kind: task\n", "    kind: task\n    colour: red\n"), "commands.DIVE.colour", "unknown field"),
+    (GOOD.replace("vehicle: BOT\n", ""), "", "missing required field 'vehicle'"),
+    ("vehicle: [1\n", "", "not valid YAML"),
+]
+
+
+@pytest.mark.parametrize(("text", "path", "message"), BAD_PROFILES)
+def test_bad_profile_names_the_offending_field(text: str, path: str, message: str) -> None:
+    with pytest.raises(ProfileError) as caught:
+        parse_profile(text, "bot.yaml")
+    assert caught.value.path == path
+    assert message in str(caught.value)
+    assert str(caught.value).startswith("bot.yaml")
+
+
+def test_bad_profile_error_has_line_and_column() -> None:
+    with pytest.raises(ProfileError) as caught:
+        parse_profile(GOOD.replace("max: 10", "max: ten"), "bot.yaml")
+    assert str(caught.value).startswith("bot.yaml:8:54:")
+
+
+def test_good_profile_loads(tmp_path: Path) -> None:
+    path = tmp_path / "bot.yaml"
+    path.write_text(GOOD)
+    profile = load_profile(path)
+    dive = profile.command("DIVE")
+    assert dive is not None and dive.params[0].maximum == 10.0
+
+
+def test_unreadable_profile_is_a_profile_error(tmp_path: Path) -> None:
+    with pytest.raises(ProfileError, match="cannot read profile"):
+        load_profile(tmp_path / "missing.yaml")
+    with pytest.raises(ProfileError, match="no bundled profile"):
+        load_bundled_profile("NOSUCH")
