@@ -178,7 +178,9 @@ class Net:
             transition_index[tr.name] = i
             for place_name, weight in (*tr.inputs, *tr.outputs):
                 if place_name not in place_index:
-                    raise NetError(f"transition '{tr.name}' has an arc to unknown place '{place_name}'")
+                    raise NetError(
+                        f"transition '{tr.name}' has an arc to unknown place '{place_name}'"
+                    )
                 if weight < 1:
                     raise NetError(f"transition '{tr.name}' has an arc of weight {weight}")
         for final in self.finals:
@@ -217,7 +219,9 @@ class Net:
         """The initial marking as a tuple aligned with `places`."""
         return tuple(p.initial for p in self.places)
 
-    def marking_from(self, tokens: Mapping[str, int] | Iterable[tuple[str, int]]) -> tuple[int, ...]:
+    def marking_from(
+        self, tokens: Mapping[str, int] | Iterable[tuple[str, int]]
+    ) -> tuple[int, ...]:
         """A full marking from a partial one (unnamed places get 0)."""
         values = [0] * len(self.places)
         items = tokens.items() if isinstance(tokens, Mapping) else tokens
@@ -284,8 +288,15 @@ class Net:
             "name": self.name,
             "vehicle": self.vehicle,
             "places": [
-                [p.name, p.initial, p.kind.value, p.capacity, list(p.resources), p.pending_of,
-                 p.complement_of]
+                [
+                    p.name,
+                    p.initial,
+                    p.kind.value,
+                    p.capacity,
+                    list(p.resources),
+                    p.pending_of,
+                    p.complement_of,
+                ]
                 for p in sorted(self.places, key=lambda p: p.name)
             ],
             "transitions": [
@@ -297,9 +308,13 @@ class Net:
                     "outputs": sorted([p, w] for p, w in t.outputs),
                     "command": None
                     if t.command is None
-                    else [t.command.system, t.command.name,
-                          [[n, v] for n, v in t.command.params], list(t.command.resources),
-                          list(t.command.replies)],
+                    else [
+                        t.command.system,
+                        t.command.name,
+                        [[n, v] for n, v in t.command.params],
+                        list(t.command.resources),
+                        list(t.command.replies),
+                    ],
                     "pending": t.pending,
                     "reply_to": t.reply_to,
                     "reply": t.reply,
@@ -308,7 +323,8 @@ class Net:
             ],
             "finals": sorted(sorted([p, w] for p, w in f.tokens) for f in self.finals),
             "assertions": sorted(
-                [a.kind.value, sorted([p, w] for p, w in a.places), a.bound] for a in self.assertions
+                [a.kind.value, sorted([p, w] for p, w in a.places), a.bound]
+                for a in self.assertions
             ),
         }
 

@@ -80,7 +80,9 @@ class CommandSpec:
 
     def signature(self) -> str:
         """E.g. ``DEPTH?(z, time_out) -> done | timeout``."""
-        return f"{self.name}({', '.join(p.name for p in self.params)}) -> {' | '.join(self.replies)}"
+        return (
+            f"{self.name}({', '.join(p.name for p in self.params)}) -> {' | '.join(self.replies)}"
+        )
 
 
 @dataclass(frozen=True)
@@ -136,7 +138,9 @@ def load_bundled_profile(system: str) -> VehicleProfile:
     path = bundled_profile_path(system)
     if path is None:
         known = ", ".join(bundled_profiles())
-        raise ProfileError(system, "", f"no bundled profile for vehicle '{system}' (bundled: {known})")
+        raise ProfileError(
+            system, "", f"no bundled profile for vehicle '{system}' (bundled: {known})"
+        )
     return load_profile(path)
 
 
@@ -147,7 +151,9 @@ def parse_profile(text: str, file: str = "<profile>") -> VehicleProfile:
     expect_keys(doc, root, "", ["vehicle", "commands"], ["description", "resources", "version"])
     name = _string(doc, root["vehicle"], "vehicle")
     if not name.isidentifier():
-        raise doc.error("vehicle", f"vehicle name '{name}' must be an identifier (letters, digits, _)")
+        raise doc.error(
+            "vehicle", f"vehicle name '{name}' must be an identifier (letters, digits, _)"
+        )
     resources = tuple(_string_list(doc, root.get("resources", []), "resources"))
     commands_node = _mapping(doc, root["commands"], "commands")
     if not commands_node:
@@ -169,17 +175,25 @@ def _command(
     doc: YamlDocument, name: str, node: Plain, path: str, resources: tuple[str, ...]
 ) -> CommandSpec:
     if not (name.rstrip("?").isidentifier() and name.count("?") <= 1):
-        raise doc.error(path, f"command name '{name}' must be an identifier, optionally ending in '?'")
+        raise doc.error(
+            path, f"command name '{name}' must be an identifier, optionally ending in '?'"
+        )
     spec = _mapping(doc, node, path)
     expect_keys(
-        doc, spec, path, ["kind", "replies"],
+        doc,
+        spec,
+        path,
+        ["kind", "replies"],
         ["params", "resources", "duration_s", "description", "space_trap"],
     )
     kind = _string(doc, spec["kind"], f"{path}.kind")
     if kind not in COMMAND_KINDS:
-        raise doc.error(f"{path}.kind", f"kind must be one of {', '.join(COMMAND_KINDS)}, not '{kind}'")
+        raise doc.error(
+            f"{path}.kind", f"kind must be one of {', '.join(COMMAND_KINDS)}, not '{kind}'"
+        )
     params = tuple(
-        _param(doc, p, f"{path}.params[{i}]") for i, p in enumerate(_list(doc, spec.get("params", []), f"{path}.params"))
+        _param(doc, p, f"{path}.params[{i}]")
+        for i, p in enumerate(_list(doc, spec.get("params", []), f"{path}.params"))
     )
     seen: set[str] = set()
     for i, param in enumerate(params):
@@ -234,12 +248,16 @@ def _param(doc: YamlDocument, node: Plain, path: str) -> ParamSpec:
         raise doc.error(f"{path}.name", f"parameter name '{name}' must be an identifier")
     type_ = _string(doc, spec["type"], f"{path}.type")
     if type_ not in PARAM_TYPES:
-        raise doc.error(f"{path}.type", f"type must be one of {', '.join(PARAM_TYPES)}, not '{type_}'")
+        raise doc.error(
+            f"{path}.type", f"type must be one of {', '.join(PARAM_TYPES)}, not '{type_}'"
+        )
     unit = None
     if spec.get("unit") is not None:
         unit = _string(doc, spec["unit"], f"{path}.unit")
         if not units.is_unit(unit):
-            raise doc.error(f"{path}.unit", f"unknown unit '{unit}'{did_you_mean(unit, units.UNITS)}")
+            raise doc.error(
+                f"{path}.unit", f"unknown unit '{unit}'{did_you_mean(unit, units.UNITS)}"
+            )
         if type_ == "string":
             raise doc.error(f"{path}.unit", "a string parameter has no unit")
     minimum = _number(doc, spec["min"], f"{path}.min") if spec.get("min") is not None else None
@@ -258,7 +276,9 @@ def _param(doc: YamlDocument, node: Plain, path: str) -> ParamSpec:
     )
 
 
-def _replies(doc: YamlDocument, node: Plain, path: str) -> tuple[tuple[str, ...], tuple[tuple[str, str], ...]]:
+def _replies(
+    doc: YamlDocument, node: Plain, path: str
+) -> tuple[tuple[str, ...], tuple[tuple[str, str], ...]]:
     if isinstance(node, list):
         names = _string_list(doc, node, path)
         meanings = [(n, "") for n in names]
@@ -285,16 +305,26 @@ def _space_trap(doc: YamlDocument, node: Plain, path: str) -> SpaceTrap:
     order_value = spec["order"]
     if not isinstance(order_value, int) or isinstance(order_value, bool) or order_value < 0:
         raise doc.error(f"{path}.order", "order must be a whole number >= 0")
-    eps = tuple(_number(doc, e, f"{path}.eps[{i}]") for i, e in enumerate(_list(doc, spec["eps"], f"{path}.eps")))
+    eps = tuple(
+        _number(doc, e, f"{path}.eps[{i}]")
+        for i, e in enumerate(_list(doc, spec["eps"], f"{path}.eps"))
+    )
     if len(eps) != order_value + 1:
-        raise doc.error(f"{path}.eps", f"order {order_value} needs {order_value + 1} tolerances (one per derivative 0..{order_value}), got {len(eps)}")
+        raise doc.error(
+            f"{path}.eps",
+            f"order {order_value} needs {order_value + 1} tolerances "
+            f"(one per derivative 0..{order_value}), got {len(eps)}",
+        )
     if any(e <= 0 for e in eps):
         raise doc.error(f"{path}.eps", "every tolerance must be > 0")
     window = _number(doc, spec["window_s"], f"{path}.window_s")
     if window <= 0:
         raise doc.error(f"{path}.window_s", "window_s must be > 0")
     return SpaceTrap(
-        signal=_string(doc, spec["signal"], f"{path}.signal"), order=order_value, eps=eps, window_s=window
+        signal=_string(doc, spec["signal"], f"{path}.signal"),
+        order=order_value,
+        eps=eps,
+        window_s=window,
     )
 
 

@@ -59,7 +59,10 @@ def _build(node: yaml.Node, path: str, document: YamlDocument) -> Plain:
             key = str(key_node.value)
             child = f"{path}.{key}" if path else key
             if key in result:
-                document.positions[child] = (key_node.start_mark.line + 1, key_node.start_mark.column + 1)
+                document.positions[child] = (
+                    key_node.start_mark.line + 1,
+                    key_node.start_mark.column + 1,
+                )
                 raise document.error(child, f"key '{key}' appears twice")
             result[key] = _build(value_node, child, document)
         return result
@@ -81,7 +84,10 @@ def _scalar(node: yaml.ScalarNode) -> Plain:
 
 
 def expect_keys(
-    document: YamlDocument, mapping: dict[str, Plain], path: str, required: Iterable[str],
+    document: YamlDocument,
+    mapping: dict[str, Plain],
+    path: str,
+    required: Iterable[str],
     optional: Iterable[str],
 ) -> None:
     """Refuse missing required keys and unknown keys (likely typos) in ``mapping``."""

@@ -9,8 +9,21 @@ import pytest
 from coral_lang.diagnostics import ProfileError
 from coral_lang.profile import load_bundled_profile, load_profile, parse_profile
 
-TABLE_1 = ["DEPTH", "DEPTH?", "HEADING", "HEADING?", "LRM", "XY?", "SRM", "GOTO", "XYPSI?",
-           "DOCKING", "DOCKING?", "FIX_XY", "GET_DOCK"]
+TABLE_1 = [
+    "DEPTH",
+    "DEPTH?",
+    "HEADING",
+    "HEADING?",
+    "LRM",
+    "XY?",
+    "SRM",
+    "GOTO",
+    "XYPSI?",
+    "DOCKING",
+    "DOCKING?",
+    "FIX_XY",
+    "GET_DOCK",
+]
 
 
 def test_romeo_profile_has_every_command_of_table_1() -> None:
@@ -42,10 +55,18 @@ def test_romeo_orders_follow_the_paper() -> None:
 def test_romeo_resources_as_the_language_sketch_gives_them() -> None:
     profile = load_bundled_profile("ROMEO")
     expected = {
-        "DEPTH": {"depth"}, "DEPTH?": {"depth"}, "HEADING": {"heading"}, "HEADING?": {"heading"},
-        "LRM": {"horizontal"}, "XY?": {"horizontal"}, "SRM": {"horizontal", "heading"},
-        "GOTO": {"horizontal", "heading"}, "XYPSI?": {"horizontal", "heading"},
-        "DOCKING": {"horizontal", "heading"}, "DOCKING?": {"horizontal"}, "FIX_XY": {"horizontal"},
+        "DEPTH": {"depth"},
+        "DEPTH?": {"depth"},
+        "HEADING": {"heading"},
+        "HEADING?": {"heading"},
+        "LRM": {"horizontal"},
+        "XY?": {"horizontal"},
+        "SRM": {"horizontal", "heading"},
+        "GOTO": {"horizontal", "heading"},
+        "XYPSI?": {"horizontal", "heading"},
+        "DOCKING": {"horizontal", "heading"},
+        "DOCKING?": {"horizontal"},
+        "FIX_XY": {"horizontal"},
     }
     for name, resources in expected.items():
         command = profile.command(name)
@@ -67,15 +88,32 @@ commands:
 
 BAD_PROFILES = [
     (GOOD.replace("max: 10", "max: ten"), "commands.DIVE.params[0].max", "expected a number"),
-    (GOOD.replace("type: float", "type: real"), "commands.DIVE.params[0].type", "type must be one of"),
-    (GOOD.replace("resources: [depth]\n    ", "resources: [dpeth]\n    ").replace(
-        "replies: [ack, error]\n    resources: [depth]", "replies: [ack, error]\n    resources: [dpeth]"),
-     "commands.DIVE.resources[0]", "did you mean 'depth'"),
+    (
+        GOOD.replace("type: float", "type: real"),
+        "commands.DIVE.params[0].type",
+        "type must be one of",
+    ),
+    (
+        GOOD.replace("resources: [depth]\n    ", "resources: [dpeth]\n    ").replace(
+            "replies: [ack, error]\n    resources: [depth]",
+            "replies: [ack, error]\n    resources: [dpeth]",
+        ),
+        "commands.DIVE.resources[0]",
+        "did you mean 'depth'",
+    ),
     (GOOD.replace("kind: task", "kind: query"), "commands.DIVE.params", "time_out"),
     (GOOD.replace("unit: m", "unit: meters"), "commands.DIVE.params[0].unit", "unknown unit"),
-    (GOOD.replace("min: 0, max: 10", "min: 10, max: 0"), "commands.DIVE.params[0].min", "greater than max"),
+    (
+        GOOD.replace("min: 0, max: 10", "min: 10, max: 0"),
+        "commands.DIVE.params[0].min",
+        "greater than max",
+    ),
     (GOOD.replace("replies: [ack, error]", "replies: []"), "commands.DIVE.replies", "at least one"),
-    (GOOD.replace("    kind: task\n", "    kind: task\n    colour: red\n"), "commands.DIVE.colour", "unknown field"),
+    (
+        GOOD.replace("    kind: task\n", "    kind: task\n    colour: red\n"),
+        "commands.DIVE.colour",
+        "unknown field",
+    ),
     (GOOD.replace("vehicle: BOT\n", ""), "", "missing required field 'vehicle'"),
     ("vehicle: [1\n", "", "not valid YAML"),
 ]
