@@ -339,5 +339,5 @@ class Net:
         arcs = sum(len(t.inputs) + len(t.outputs) for t in self.transitions)
         return (
             f"net '{self.name}': {len(self.places)} places, {len(self.transitions)} transitions, "
-            f"{arcs} arcs, {len(self.finals)} final markings"
+            f"{arcs} arcs, {len(self.finals)} final marking{'' if len(self.finals) == 1 else 's'}"
         )

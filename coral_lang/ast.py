@@ -1,0 +1,169 @@
+"""The syntax tree of a CORAL mission. Every node keeps the span of the text that made it.
+
+Spans are excluded from equality, so two trees compare equal when they say the same
+thing, wherever it was written: the printer's round-trip test relies on that.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+from coral_lang.diagnostics import Span
+
+_NOWHERE = Span("<generated>", 0, 0, 0, 0)
+
+
+@dataclass(frozen=True)
+class Number:
+    """A numeric literal, possibly with a unit: ``2.0``, ``250 cm``, ``-3``."""
+
+    value: int | float
+    unit: str | None = None
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class String:
+    """A string literal."""
+
+    value: str
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class Name:
+    """A reference to a constant by name."""
+
+    name: str
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+Value = Number | String | Name
+
+
+@dataclass(frozen=True)
+class TokenRef:
+    """A place with an optional arc weight or token count: ``p`` or ``p*2``."""
+
+    place: str
+    weight: Number | Name | None = None
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class Const:
+    """``const NAME = value``."""
+
+    name: str
+    value: Number | String
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class PlaceDecl:
+    """One place of a ``place`` statement: ``name [= tokens] [capacity k]``."""
+
+    name: str
+    initial: Number | Name | None = None
+    capacity: Number | Name | None = None
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class Places:
+    """``place a, b = 2, c capacity 3``."""
+
+    places: tuple[PlaceDecl, ...]
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class Final:
+    """``final { p, q*2 }``: a proper end of the mission."""
+
+    tokens: tuple[TokenRef, ...]
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class Arg:
+    """A command argument, positional (``name`` None) or named."""
+
+    name: str | None
+    value: Value
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class ReplyMap:
+    """``reply: place``, ``reply: { a, b }`` or ``reply: ignore`` (``targets`` None)."""
+
+    reply: str
+    targets: tuple[TokenRef, ...] | None
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class Action:
+    """``SYSTEM(COMMAND, args...) -> { reply: place, ... }``."""
+
+    system: str
+    command: str
+    args: tuple[Arg, ...]
+    replies: tuple[ReplyMap, ...]
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+    command_span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class TransitionDecl:
+    """``transition NAME [priority N]`` with ``wait``, optional ``action``, ``signal``."""
+
+    name: str
+    priority: Number | Name | None = None
+    wait: tuple[TokenRef, ...] = ()
+    action: Action | None = None
+    signal: tuple[TokenRef, ...] = ()
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class Include:
+    """``include "other.coral"``."""
+
+    path: str
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+class AssertKind(enum.Enum):
+    """Which property an ``assert`` states."""
+
+    NEVER = "never"
+    REACHABLE = "reachable"
+    BOUND = "bound"
+
+
+@dataclass(frozen=True)
+class AssertDecl:
+    """``assert never {a, b}``, ``assert reachable {p}``, ``assert bound p <= k``."""
+
+    kind: AssertKind
+    tokens: tuple[TokenRef, ...]
+    bound: Number | Name | None = None
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+Declaration = Const | Places | Final | TransitionDecl | Include | AssertDecl
+
+
+@dataclass(frozen=True)
+class Mission:
+    """One source file: an optional header and its declarations."""
+
+    name: str | None
+    vehicle: str | None
+    declarations: tuple[Declaration, ...]
+    file: str = field(default="<mission>", compare=False)
+    name_span: Span = field(default=_NOWHERE, compare=False, repr=False)
+    vehicle_span: Span = field(default=_NOWHERE, compare=False, repr=False)

@@ -1,0 +1,855 @@
+"""Compile CORAL missions to a `Net`, checking every command against the vehicle profile.
+
+Lowering (see ``docs/language.md``):
+
+* ``place p = k`` becomes a place with k initial tokens; ``capacity c`` adds a
+  complement place ``p.free`` holding the free room, so the net stays a plain P/T net
+  and a transition that would overfill ``p`` is not enabled.
+* ``transition t`` consumes its ``wait`` set and produces its ``signal`` set. With an
+  ``action``, it also puts a token in the pending place ``t.pending``; each reply kind
+  ``r`` of the command becomes a reply transition ``t.r`` that takes the pending token
+  and marks the places the mission maps ``r`` to (nothing, for ``r: ignore``).
+
+All errors of all files are collected before anything is reported.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from coral_lang import ast, units
+from coral_lang.diagnostics import (
+    CompileError,
+    Diagnostic,
+    ProfileError,
+    Severity,
+    Span,
+    did_you_mean,
+    sort_diagnostics,
+)
+from coral_lang.net import (
+    Assertion,
+    AssertKind,
+    Command,
+    FinalMarking,
+    Net,
+    Place,
+    PlaceKind,
+    Transition,
+    TransitionKind,
+    Value,
+)
+from coral_lang.parser import parse
+from coral_lang.profile import CommandSpec, ParamSpec, VehicleProfile, load_bundled_profile
+
+PENDING_SUFFIX = ".pending"
+FREE_SUFFIX = ".free"
+
+
+@dataclass
+class CompileResult:
+    """What a compile produced: the net (None when there were errors) and every diagnostic."""
+
+    net: Net | None
+    diagnostics: list[Diagnostic]
+    sources: dict[str, str]
+    missions: list[ast.Mission] = field(default_factory=list)
+    profile: VehicleProfile | None = None
+
+    @property
+    def errors(self) -> list[Diagnostic]:
+        """The diagnostics of severity error."""
+        return [d for d in self.diagnostics if d.severity is Severity.ERROR]
+
+    @property
+    def ok(self) -> bool:
+        """True when the mission compiled without errors."""
+        return self.net is not None and not self.errors
+
+    def raise_for_errors(self) -> Net:
+        """The net, or `CompileError` with every diagnostic."""
+        if self.net is None or self.errors:
+            raise CompileError(self.errors, self.sources)
+        return self.net
+
+
+def compile_file(path: str | Path, profiles: Sequence[VehicleProfile] = ()) -> CompileResult:
+    """Compile the mission in ``path`` (and the files it includes).
+
+    Args:
+        path: the mission file.
+        profiles: vehicle profiles to use before the bundled ones (matched by vehicle name).
+    """
+    path = Path(path)
+    compiler = _Compiler(profiles)
+    compiler.load_root(path)
+    return compiler.finish()
+
+
+def compile_source(
+    text: str,
+    file: str = "<mission>",
+    profiles: Sequence[VehicleProfile] = (),
+    base_dir: str | Path | None = None,
+) -> CompileResult:
+    """Compile mission ``text``; includes resolve against ``base_dir`` (default: cwd)."""
+    compiler = _Compiler(profiles)
+    compiler.load_text(text, file, Path(base_dir) if base_dir is not None else Path.cwd())
+    return compiler.finish()
+
+
+def compile_mission(path: str | Path, profiles: Sequence[VehicleProfile] = ()) -> Net:
+    """Compile ``path`` to a `Net`; raises `CompileError` listing every error."""
+    return compile_file(path, profiles).raise_for_errors()
+
+
+@dataclass
+class _PlaceInfo:
+    name: str
+    span: Span
+    initial: int | None = None
+    initial_span: Span | None = None
+    capacity: int | None = None
+    capacity_span: Span | None = None
+    file: str = ""
+
+
+@dataclass
+class _ConstInfo:
+    decl: ast.Const
+    file: str
+
+
+class _Compiler:
+    def __init__(self, profiles: Sequence[VehicleProfile]) -> None:
+        self.profiles = list(profiles)
+        self.diagnostics: list[Diagnostic] = []
+        self.sources: dict[str, str] = {}
+        self.missions: list[ast.Mission] = []
+        self.loaded: set[Path] = set()
+        self.declarations: list[tuple[ast.Declaration, str]] = []
+
+    # -- loading and includes -------------------------------------------------------------
+
+    def error(self, code: str, message: str, span: Span | None, *notes: str) -> None:
+        self.diagnostics.append(Diagnostic(Severity.ERROR, code, message, span, tuple(notes)))
+
+    def load_root(self, path: Path) -> None:
+        text = self._read(path, None)
+        if text is not None:
+            self.load_text(text, str(path), path.resolve().parent, resolved=path.resolve())
+
+    def _read(self, path: Path, span: Span | None) -> str | None:
+        try:
+            return path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            self.error("CORAL004", f"file not found: {path}", span)
+        except IsADirectoryError:
+            self.error("CORAL004", f"is a directory, not a mission file: {path}", span)
+        except UnicodeDecodeError as exc:
+            self.error(
+                "CORAL004", f"not UTF-8 text: {path} ({exc.reason} at byte {exc.start})", span
+            )
+        except OSError as exc:
+            self.error("CORAL004", f"cannot read {path}: {exc.strerror}", span)
+        return None
+
+    def load_text(
+        self,
+        text: str,
+        file: str,
+        base_dir: Path,
+        resolved: Path | None = None,
+        stack: tuple[Path, ...] = (),
+    ) -> None:
+        self.sources[file] = text
+        if resolved is not None:
+            self.loaded.add(resolved)
+        mission, diagnostics = parse(text, file)
+        self.diagnostics.extend(diagnostics)
+        self.missions.append(mission)
+        for declaration in mission.declarations:
+            if isinstance(declaration, ast.Include):
+                self._include(declaration, base_dir, stack + ((resolved,) if resolved else ()))
+            else:
+                self.declarations.append((declaration, file))
+
+    def _include(self, include: ast.Include, base_dir: Path, stack: tuple[Path, ...]) -> None:
+        target = (base_dir / include.path).resolve()
+        if target in stack:
+            chain = " -> ".join(p.name for p in (*stack, target))
+            self.error("CORAL004", f"include cycle: {chain}", include.span)
+            return
+        if target in self.loaded:
+            return  # included already (diamond): one copy of its declarations
+        text = self._read(target, include.span)
+        if text is None:
+            return
+        self.load_text(text, _display_path(target), target.parent, resolved=target, stack=stack)
+
+    # -- checking and lowering ------------------------------------------------------------
+
+    def finish(self) -> CompileResult:
+        if not self.missions:
+            return CompileResult(None, self.diagnostics, self.sources)
+        root = self.missions[0]
+        profile = self._header(root)
+        consts = self._consts()
+        places = self._places(consts)
+        finals = self._finals(places, consts)
+        assertions = self._assertions(places, consts)
+        transitions, pending = self._transitions(places, consts, profile, root.vehicle)
+        net: Net | None = None
+        if not any(d.severity is Severity.ERROR for d in self.diagnostics):
+            net = self._build(root, places, pending, transitions, finals, assertions)
+        return CompileResult(
+            net, sort_diagnostics(self.diagnostics), self.sources, self.missions, profile
+        )
+
+    def _header(self, root: ast.Mission) -> VehicleProfile | None:
+        if root.name is None:
+            self.error(
+                "CORAL007", "a mission file starts with 'mission NAME'", Span(root.file, 1, 1, 1, 2)
+            )
+        if root.vehicle is None:
+            self.error(
+                "CORAL007",
+                "the mission does not say its vehicle: add 'vehicle NAME' after the mission line",
+                root.name_span if root.name else Span(root.file, 1, 1, 1, 2),
+            )
+            return None
+        for included in self.missions[1:]:
+            if included.vehicle is not None and included.vehicle != root.vehicle:
+                self.error(
+                    "CORAL004",
+                    f"included file is written for vehicle '{included.vehicle}', "
+                    f"the mission for '{root.vehicle}'",
+                    included.vehicle_span,
+                )
+        for profile in self.profiles:
+            if profile.name == root.vehicle:
+                return profile
+        try:
+            return load_bundled_profile(root.vehicle)
+        except ProfileError as exc:
+            names = ", ".join(p.name for p in self.profiles)
+            self.error(
+                "CORAL006",
+                f"no vehicle profile for '{root.vehicle}'",
+                root.vehicle_span,
+                exc.detail,
+                *([f"profiles given: {names}"] if names else []),
+                "pass the profile file with --profile FILE",
+            )
+            return None
+
+    def _consts(self) -> dict[str, _ConstInfo]:
+        consts: dict[str, _ConstInfo] = {}
+        for declaration, file in self.declarations:
+            if not isinstance(declaration, ast.Const):
+                continue
+            previous = consts.get(declaration.name)
+            if previous is not None:
+                if previous.file == file or previous.decl.value != declaration.value:
+                    self.error(
+                        "CORAL003",
+                        f"constant '{declaration.name}' is declared twice",
+                        declaration.span,
+                        f"first declared at {previous.decl.span}",
+                    )
+                continue
+            consts[declaration.name] = _ConstInfo(declaration, file)
+        return consts
+
+    def _resolve(
+        self, value: ast.Value, consts: dict[str, _ConstInfo]
+    ) -> ast.Number | ast.String | None:
+        if isinstance(value, ast.Name):
+            info = consts.get(value.name)
+            if info is None:
+                self.error(
+                    "CORAL002",
+                    f"unknown constant '{value.name}'{did_you_mean(value.name, consts)}",
+                    value.span,
+                )
+                return None
+            return info.decl.value
+        return value
+
+    def _count(
+        self, value: ast.Number | ast.Name, consts: dict[str, _ConstInfo], what: str, minimum: int
+    ) -> int | None:
+        resolved = self._resolve(value, consts)
+        if resolved is None:
+            return None
+        if (
+            not isinstance(resolved, ast.Number)
+            or not isinstance(resolved.value, int)
+            or resolved.unit is not None
+        ):
+            shown = _show(resolved)
+            self.error("CORAL005", f"{what} must be a whole number, got {shown}", value.span)
+            return None
+        if resolved.value < minimum:
+            self.error(
+                "CORAL005", f"{what} must be at least {minimum}, got {resolved.value}", value.span
+            )
+            return None
+        return resolved.value
+
+    def _places(self, consts: dict[str, _ConstInfo]) -> dict[str, _PlaceInfo]:
+        places: dict[str, _PlaceInfo] = {}
+        for declaration, file in self.declarations:
+            if not isinstance(declaration, ast.Places):
+                continue
+            for decl in declaration.places:
+                initial = (
+                    self._count(decl.initial, consts, f"initial tokens of '{decl.name}'", 0)
+                    if decl.initial is not None
+                    else None
+                )
+                capacity = (
+                    self._count(decl.capacity, consts, f"capacity of '{decl.name}'", 1)
+                    if decl.capacity is not None
+                    else None
+                )
+                info = places.get(decl.name)
+                if info is None:
+                    places[decl.name] = _PlaceInfo(
+                        decl.name,
+                        decl.span,
+                        initial,
+                        decl.initial.span if decl.initial else None,
+                        capacity,
+                        decl.capacity.span if decl.capacity else None,
+                        file,
+                    )
+                    continue
+                if info.file == file:
+                    self.error(
+                        "CORAL003",
+                        f"place '{decl.name}' is declared twice",
+                        decl.span,
+                        f"first declared at {info.span}",
+                    )
+                    continue
+                # The same place declared in another file (a shared interface place).
+                if initial is not None:
+                    if info.initial is not None and info.initial != initial:
+                        self.error(
+                            "CORAL003",
+                            f"place '{decl.name}' is given {initial} initial tokens here and "
+                            f"{info.initial} at {info.initial_span}",
+                            decl.span,
+                        )
+                    info.initial, info.initial_span = initial, decl.span
+                if capacity is not None:
+                    if info.capacity is not None and info.capacity != capacity:
+                        self.error(
+                            "CORAL003",
+                            f"place '{decl.name}' is given capacity {capacity} here and "
+                            f"{info.capacity} at {info.capacity_span}",
+                            decl.span,
+                        )
+                    info.capacity, info.capacity_span = capacity, decl.span
+        for info in places.values():
+            if info.capacity is not None and (info.initial or 0) > info.capacity:
+                self.error(
+                    "CORAL005",
+                    f"place '{info.name}' starts with {info.initial} tokens, "
+                    f"more than its capacity {info.capacity}",
+                    info.initial_span or info.span,
+                )
+        return places
+
+    def _tokens(
+        self,
+        refs: Sequence[ast.TokenRef],
+        places: dict[str, _PlaceInfo],
+        consts: dict[str, _ConstInfo],
+        what: str,
+    ) -> tuple[tuple[str, int], ...] | None:
+        result: dict[str, int] = {}
+        ok = True
+        for ref in refs:
+            if ref.place not in places:
+                self.error(
+                    "CORAL002",
+                    f"unknown place '{ref.place}'{did_you_mean(ref.place, places)}",
+                    ref.span,
+                )
+                ok = False
+                continue
+            weight = 1
+            if ref.weight is not None:
+                counted = self._count(ref.weight, consts, f"weight of '{ref.place}'", 1)
+                if counted is None:
+                    ok = False
+                    continue
+                weight = counted
+            if ref.place in result:
+                self.error(
+                    "CORAL003",
+                    f"place '{ref.place}' appears twice in {what}; "
+                    f"write '{ref.place}*N' for N tokens",
+                    ref.span,
+                )
+                ok = False
+                continue
+            result[ref.place] = weight
+        return tuple(result.items()) if ok else None
+
+    def _finals(
+        self, places: dict[str, _PlaceInfo], consts: dict[str, _ConstInfo]
+    ) -> list[FinalMarking]:
+        finals: list[FinalMarking] = []
+        seen: set[tuple[tuple[str, int], ...]] = set()
+        for declaration, _ in self.declarations:
+            if isinstance(declaration, ast.Final):
+                tokens = self._tokens(declaration.tokens, places, consts, "a final marking")
+                if tokens is not None and tuple(sorted(tokens)) not in seen:
+                    seen.add(tuple(sorted(tokens)))
+                    finals.append(FinalMarking(tokens, declaration.span))
+        return finals
+
+    def _assertions(
+        self, places: dict[str, _PlaceInfo], consts: dict[str, _ConstInfo]
+    ) -> list[Assertion]:
+        assertions: list[Assertion] = []
+        for declaration, _ in self.declarations:
+            if not isinstance(declaration, ast.AssertDecl):
+                continue
+            tokens = self._tokens(declaration.tokens, places, consts, "an assertion")
+            bound = None
+            if declaration.bound is not None:
+                bound = self._count(declaration.bound, consts, "a bound", 0)
+                if bound is None:
+                    continue
+            if tokens is not None:
+                assertions.append(
+                    Assertion(AssertKind(declaration.kind.value), tokens, bound, declaration.span)
+                )
+        return assertions
+
+    def _transitions(
+        self,
+        places: dict[str, _PlaceInfo],
+        consts: dict[str, _ConstInfo],
+        profile: VehicleProfile | None,
+        vehicle: str | None,
+    ) -> tuple[list[Transition], list[Place]]:
+        transitions: list[Transition] = []
+        pending: list[Place] = []
+        seen: dict[str, Span] = {}
+        for declaration, _ in self.declarations:
+            if not isinstance(declaration, ast.TransitionDecl):
+                continue
+            name = declaration.name
+            if name in seen:
+                self.error(
+                    "CORAL003",
+                    f"transition '{name}' is declared twice",
+                    declaration.span,
+                    f"first declared at {seen[name]}",
+                )
+                continue
+            seen[name] = declaration.span
+            if name in places:
+                self.error(
+                    "CORAL003",
+                    f"'{name}' names both a place and a transition",
+                    declaration.span,
+                    f"the place is declared at {places[name].span}",
+                )
+            priority = 0
+            if declaration.priority is not None:
+                value = self._resolve(declaration.priority, consts)
+                if (
+                    isinstance(value, ast.Number)
+                    and isinstance(value.value, int)
+                    and value.unit is None
+                ):
+                    priority = value.value
+                elif value is not None:
+                    self.error(
+                        "CORAL005",
+                        f"priority must be a whole number, got {_show(value)}",
+                        declaration.priority.span,
+                    )
+            inputs = self._tokens(declaration.wait, places, consts, "'wait'")
+            outputs = self._tokens(declaration.signal, places, consts, "'signal'")
+            if declaration.action is None:
+                if inputs is not None and outputs is not None:
+                    transitions.append(
+                        Transition(
+                            name,
+                            inputs,
+                            outputs,
+                            TransitionKind.PLAIN,
+                            priority,
+                            name,
+                            declaration.span,
+                        )
+                    )
+                continue
+            lowered = self._action(
+                declaration, declaration.action, places, consts, profile, vehicle
+            )
+            if lowered is None or inputs is None or outputs is None:
+                continue
+            command, replies = lowered
+            pending_name = name + PENDING_SUFFIX
+            pending.append(
+                Place(
+                    pending_name,
+                    0,
+                    PlaceKind.PENDING,
+                    label=f"{command.name} pending",
+                    span=declaration.action.span,
+                    resources=command.resources,
+                    pending_of=name,
+                )
+            )
+            transitions.append(
+                Transition(
+                    name,
+                    inputs,
+                    (*outputs, (pending_name, 1)),
+                    TransitionKind.COMMAND,
+                    priority,
+                    command.header(),
+                    declaration.span,
+                    command=command,
+                    pending=pending_name,
+                )
+            )
+            for reply, targets, span in replies:
+                transitions.append(
+                    Transition(
+                        f"{name}.{reply}",
+                        ((pending_name, 1),),
+                        targets,
+                        TransitionKind.REPLY,
+                        0,
+                        command.name,
+                        span,
+                        reply_to=name,
+                        reply=reply,
+                    )
+                )
+        return transitions, pending
+
+    def _action(
+        self,
+        transition: ast.TransitionDecl,
+        action: ast.Action,
+        places: dict[str, _PlaceInfo],
+        consts: dict[str, _ConstInfo],
+        profile: VehicleProfile | None,
+        vehicle: str | None,
+    ) -> tuple[Command, list[tuple[str, tuple[tuple[str, int], ...], Span]]] | None:
+        if vehicle is not None and action.system != vehicle:
+            self.error(
+                "CORAL006",
+                f"this mission commands vehicle '{vehicle}', not '{action.system}'",
+                action.span,
+                f"write {vehicle}({action.command}, ...)",
+            )
+            return None
+        if profile is None:
+            return None
+        spec = profile.command(action.command)
+        if spec is None:
+            self.error(
+                "CORAL101",
+                f"unknown command '{action.command}' for {profile.name}"
+                f"{did_you_mean(action.command, profile.command_names)}",
+                action.command_span,
+                f"{profile.name} accepts: {', '.join(profile.command_names)}",
+            )
+            return None
+        params = self._params(action, spec, consts)
+        replies = self._replies(transition, action, spec, places, consts)
+        if params is None or replies is None:
+            return None
+        command = Command(profile.name, spec.name, params, spec.resources, spec.replies)
+        return command, replies
+
+    def _params(
+        self, action: ast.Action, spec: CommandSpec, consts: dict[str, _ConstInfo]
+    ) -> tuple[tuple[str, Value], ...] | None:
+        given: dict[str, ast.Arg] = {}
+        ok = True
+        seen_named = False
+        signature = f"{spec.name}({', '.join(p.describe() for p in spec.params)})"
+        for index, arg in enumerate(action.args):
+            if arg.name is None:
+                if seen_named:
+                    self.error(
+                        "CORAL102",
+                        "positional argument after a named one",
+                        arg.span,
+                        f"signature: {signature}",
+                    )
+                    ok = False
+                    continue
+                if index >= len(spec.params):
+                    self.error(
+                        "CORAL102",
+                        f"{spec.name} takes {len(spec.params)} parameter"
+                        f"{'' if len(spec.params) == 1 else 's'}, got {len(action.args)}",
+                        arg.span,
+                        f"signature: {signature}",
+                    )
+                    ok = False
+                    continue
+                pname = spec.params[index].name
+            else:
+                seen_named = True
+                pname = arg.name
+                if spec.param(pname) is None:
+                    names = [p.name for p in spec.params]
+                    self.error(
+                        "CORAL102",
+                        f"{spec.name} has no parameter '{pname}'{did_you_mean(pname, names)}",
+                        arg.span,
+                        f"signature: {signature}",
+                    )
+                    ok = False
+                    continue
+            if pname in given:
+                self.error("CORAL102", f"parameter '{pname}' given twice", arg.span)
+                ok = False
+                continue
+            given[pname] = arg
+        missing = [p.name for p in spec.params if p.name not in given]
+        if missing and ok:
+            plural = "s" if len(missing) > 1 else ""
+            self.error(
+                "CORAL102",
+                f"{spec.name} is missing parameter{plural} {', '.join(repr(m) for m in missing)}",
+                action.command_span,
+                f"signature: {signature}",
+            )
+            ok = False
+        values: list[tuple[str, Value]] = []
+        for param in spec.params:
+            if param.name not in given:
+                continue
+            value = self._param_value(spec, param, given[param.name], consts)
+            if value is None:
+                ok = False
+            else:
+                values.append((param.name, value))
+        return tuple(values) if ok else None
+
+    def _param_value(
+        self, spec: CommandSpec, param: ParamSpec, arg: ast.Arg, consts: dict[str, _ConstInfo]
+    ) -> Value | None:
+        resolved = self._resolve(arg.value, consts)
+        if resolved is None:
+            return None
+        where = arg.value.span
+        via: tuple[str, ...] = ()
+        if isinstance(arg.value, ast.Name):
+            via = (f"'{arg.value.name}' is defined at {consts[arg.value.name].decl.span}",)
+        label = f"parameter '{param.name}' of {spec.name}"
+        if param.type == "string":
+            if not isinstance(resolved, ast.String):
+                self.error("CORAL103", f"{label} is text, got {_show(resolved)}", where, *via)
+                return None
+            return resolved.value
+        if not isinstance(resolved, ast.Number):
+            self.error(
+                "CORAL103",
+                f"{label} is a number ({param.type}), got {_show(resolved)}",
+                where,
+                *via,
+            )
+            return None
+        number: float | int = resolved.value
+        if param.type == "int" and not isinstance(number, int):
+            self.error(
+                "CORAL103", f"{label} must be a whole number, got {_show(resolved)}", where, *via
+            )
+            return None
+        if resolved.unit is not None:
+            if param.unit is None:
+                self.error("CORAL104", f"{label} takes no unit, got '{resolved.unit}'", where, *via)
+                return None
+            try:
+                number = units.convert(float(number), resolved.unit, param.unit)
+            except ValueError:
+                self.error(
+                    "CORAL104",
+                    f"{label} is in {param.unit} ({units.dimension(param.unit)}), got "
+                    f"'{resolved.unit}' ({units.dimension(resolved.unit)})",
+                    where,
+                    *via,
+                )
+                return None
+            if param.type == "int":
+                if not float(number).is_integer():
+                    self.error(
+                        "CORAL103",
+                        f"{label} must be a whole number of {param.unit}, got {number:g}",
+                        where,
+                        *via,
+                    )
+                    return None
+                number = int(number)
+        if param.type == "float":
+            number = float(number)
+        unit = f" {param.unit}" if param.unit else ""
+        if (param.minimum is not None and number < param.minimum) or (
+            param.maximum is not None and number > param.maximum
+        ):
+            low = "-inf" if param.minimum is None else f"{param.minimum:g}"
+            high = "inf" if param.maximum is None else f"{param.maximum:g}"
+            self.error(
+                "CORAL105",
+                f"{label} must be in [{low}, {high}]{unit}, got {number:g}{unit}",
+                where,
+                *via,
+            )
+            return None
+        return number
+
+    def _replies(
+        self,
+        transition: ast.TransitionDecl,
+        action: ast.Action,
+        spec: CommandSpec,
+        places: dict[str, _PlaceInfo],
+        consts: dict[str, _ConstInfo],
+    ) -> list[tuple[str, tuple[tuple[str, int], ...], Span]] | None:
+        mapped: dict[str, tuple[tuple[tuple[str, int], ...], Span]] = {}
+        misspelt: set[str] = set()  # kinds a misspelling already points at: no second error
+        ok = True
+        for reply in action.replies:
+            if reply.reply not in spec.replies:
+                misspelt.update(
+                    difflib.get_close_matches(reply.reply, spec.replies, n=1, cutoff=0.6)
+                )
+                self.error(
+                    "CORAL107",
+                    f"{spec.name} never replies '{reply.reply}'"
+                    f"{did_you_mean(reply.reply, spec.replies)}",
+                    reply.span,
+                    f"{spec.name} replies: {', '.join(spec.replies)}",
+                )
+                ok = False
+                continue
+            if reply.reply in mapped:
+                self.error(
+                    "CORAL108",
+                    f"reply '{reply.reply}' is mapped twice",
+                    reply.span,
+                    f"first mapped at {mapped[reply.reply][1]}",
+                )
+                ok = False
+                continue
+            targets: tuple[tuple[str, int], ...] | None = ()
+            if reply.targets is not None:
+                targets = self._tokens(reply.targets, places, consts, f"reply '{reply.reply}'")
+            if targets is None:
+                ok = False
+                continue
+            mapped[reply.reply] = (targets, reply.span)
+        missing = [r for r in spec.replies if r not in mapped]
+        if missing and not set(missing) <= misspelt:
+            plural = "s" if len(missing) > 1 else ""
+            example = ", ".join(f"{r}: PLACE" for r in missing)
+            self.error(
+                "CORAL106",
+                f"{spec.name} can reply {', '.join(repr(r) for r in missing)}, but "
+                f"transition '{transition.name}' does not say where that reply goes",
+                action.command_span,
+                f"map the reply kind{plural} to a place ({example}), "
+                f"or write '{missing[0]}: ignore' to drop it on purpose",
+            )
+            ok = False
+        if not ok:
+            return None
+        return [(r, mapped[r][0], mapped[r][1]) for r in spec.replies]
+
+    def _build(
+        self,
+        root: ast.Mission,
+        places: dict[str, _PlaceInfo],
+        pending: list[Place],
+        transitions: list[Transition],
+        finals: list[FinalMarking],
+        assertions: list[Assertion],
+    ) -> Net:
+        mission_places = [
+            Place(
+                info.name, info.initial or 0, PlaceKind.MISSION, info.capacity, info.name, info.span
+            )
+            for info in places.values()
+        ]
+        complements = [
+            Place(
+                info.name + FREE_SUFFIX,
+                info.capacity - (info.initial or 0),
+                PlaceKind.COMPLEMENT,
+                label=f"free room of {info.name}",
+                span=info.capacity_span,
+                complement_of=info.name,
+            )
+            for info in places.values()
+            if info.capacity is not None
+        ]
+        bounded = {
+            info.name: info.name + FREE_SUFFIX
+            for info in places.values()
+            if info.capacity is not None
+        }
+        if bounded:
+            transitions = [_with_complements(t, bounded) for t in transitions]
+        return Net(
+            name=root.name or "mission",
+            places=(*mission_places, *pending, *complements),
+            transitions=tuple(transitions),
+            finals=tuple(finals),
+            assertions=tuple(assertions),
+            vehicle=root.vehicle,
+            sources=tuple(self.sources),
+        )
+
+
+def _with_complements(transition: Transition, bounded: dict[str, str]) -> Transition:
+    """Add arcs to complement places so firing never overfills a bounded place."""
+    pre = dict(transition.inputs)
+    post = dict(transition.outputs)
+    changed = False
+    for place, free in bounded.items():
+        delta = post.get(place, 0) - pre.get(place, 0)
+        if delta > 0:
+            pre[free] = delta
+            changed = True
+        elif delta < 0:
+            post[free] = -delta
+            changed = True
+    if not changed:
+        return transition
+    from dataclasses import replace
+
+    return replace(transition, inputs=tuple(pre.items()), outputs=tuple(post.items()))
+
+
+def _show(value: ast.Number | ast.String) -> str:
+    if isinstance(value, ast.String):
+        return f'text "{value.value}"'
+    unit = f" {value.unit}" if value.unit else ""
+    return f"{value.value!r}{unit}"
+
+
+def _display_path(path: Path) -> str:
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)

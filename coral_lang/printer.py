@@ -1,0 +1,123 @@
+"""Print a mission tree back as CORAL text, in the canonical layout.
+
+``parse(format_mission(tree))`` gives back ``tree`` (spans aside): the property tests
+hold the parser and printer to that.
+"""
+
+from __future__ import annotations
+
+from coral_lang import ast
+
+INDENT = "    "
+
+
+def format_mission(mission: ast.Mission) -> str:
+    """The canonical text of ``mission``."""
+    lines: list[str] = []
+    if mission.name is not None:
+        lines.append(f"mission {mission.name}")
+    if mission.vehicle is not None:
+        lines.append(f"vehicle {mission.vehicle}")
+    for declaration in mission.declarations:
+        if lines:
+            lines.append("")
+        lines.extend(format_declaration(declaration))
+    return "\n".join(lines) + "\n"
+
+
+def format_declaration(declaration: ast.Declaration) -> list[str]:
+    """The lines of one declaration."""
+    if isinstance(declaration, ast.Const):
+        return [f"const {declaration.name} = {format_value(declaration.value)}"]
+    if isinstance(declaration, ast.Places):
+        return ["place " + ", ".join(_place(p) for p in declaration.places)]
+    if isinstance(declaration, ast.Final):
+        return [f"final {format_tokens(declaration.tokens)}"]
+    if isinstance(declaration, ast.Include):
+        return [f"include {format_string(declaration.path)}"]
+    if isinstance(declaration, ast.AssertDecl):
+        if declaration.kind is ast.AssertKind.BOUND:
+            assert declaration.bound is not None
+            target = (
+                format_token(declaration.tokens[0])
+                if len(declaration.tokens) == 1
+                else format_tokens(declaration.tokens)
+            )
+            return [f"assert bound {target} <= {format_value(declaration.bound)}"]
+        return [f"assert {declaration.kind.value} {format_tokens(declaration.tokens)}"]
+    return _transition(declaration)
+
+
+def _place(place: ast.PlaceDecl) -> str:
+    text = place.name
+    if place.initial is not None:
+        text += f" = {format_value(place.initial)}"
+    if place.capacity is not None:
+        text += f" capacity {format_value(place.capacity)}"
+    return text
+
+
+def _transition(transition: ast.TransitionDecl) -> list[str]:
+    header = f"transition {transition.name}"
+    if transition.priority is not None:
+        header += f" priority {format_value(transition.priority)}"
+    lines = [header]
+    if transition.wait or (transition.action is None and not transition.signal):
+        lines.append(f"{INDENT}wait   {format_tokens(transition.wait)}")
+    if transition.action is not None:
+        lines.append(f"{INDENT}action {{ {format_action(transition.action)} }}")
+    if transition.signal:
+        lines.append(f"{INDENT}signal {format_tokens(transition.signal)}")
+    return lines
+
+
+def format_action(action: ast.Action) -> str:
+    """``ROMEO(DEPTH, z = 2.0) -> { ack: a, error: b }``."""
+    args = "".join(", " + _arg(a) for a in action.args)
+    replies = ", ".join(_reply(r) for r in action.replies)
+    return f"{action.system}({action.command}{args}) -> {{ {replies} }}"
+
+
+def _arg(arg: ast.Arg) -> str:
+    value = format_value(arg.value)
+    return value if arg.name is None else f"{arg.name} = {value}"
+
+
+def _reply(reply: ast.ReplyMap) -> str:
+    if reply.targets is None:
+        return f"{reply.reply}: ignore"
+    if len(reply.targets) == 1:
+        return f"{reply.reply}: {format_token(reply.targets[0])}"
+    return f"{reply.reply}: {format_tokens(reply.targets)}"
+
+
+def format_tokens(tokens: tuple[ast.TokenRef, ...]) -> str:
+    """``{ a, b*2 }`` (``{ }`` when empty)."""
+    if not tokens:
+        return "{ }"
+    return "{ " + ", ".join(format_token(t) for t in tokens) + " }"
+
+
+def format_token(token: ast.TokenRef) -> str:
+    """``p`` or ``p*2``."""
+    if token.weight is None:
+        return token.place
+    return f"{token.place}*{format_value(token.weight)}"
+
+
+def format_value(value: ast.Value) -> str:
+    """A literal or constant name as it is written in source."""
+    if isinstance(value, ast.Name):
+        return value.name
+    if isinstance(value, ast.String):
+        return format_string(value.value)
+    number = repr(value.value)
+    return number if value.unit is None else f"{number} {value.unit}"
+
+
+def format_string(text: str) -> str:
+    """A double-quoted string literal with the escapes the lexer reads back."""
+    escaped = (
+        text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n").replace("\t", "\\t")
+    )
+    return f'"{escaped}"'

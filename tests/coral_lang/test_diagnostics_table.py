@@ -1,0 +1,252 @@
+"""Bad snippets and the exact diagnostic each must produce.
+
+This table documents the language's errors as much as it tests them: each row is a
+mistake a mission author makes, and the message they must see.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from coral_lang.compiler import compile_source
+
+HEADER = "mission m\nvehicle ROMEO\n"
+PLACES = "place a = 1, b, c\n"
+
+
+def _first(text: str) -> str:
+    result = compile_source(text, "m.coral")
+    assert result.errors, "expected an error"
+    first = result.errors[0]
+    assert first.span is not None
+    return f"{first.span.line}:{first.span.col}: {first.message} [{first.code}]"
+
+
+TABLE: list[tuple[str, str]] = [
+    # syntax
+    (
+        HEADER + "place a = 1\ntransition t wait { a } signal { b c }\n",
+        "4:36: expected '}' to close the place set (places are separated by ','), found 'c' [CORAL001]",
+    ),
+    (HEADER + "place a @\n", "3:9: unexpected character '@' [CORAL001]"),
+    (
+        HEADER + "place wait\n",
+        "3:7: expected a place name, found keyword 'wait' (keywords are reserved) [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + "transition t wiat { a }\n",
+        "4:14: unknown clause 'wiat' (did you mean 'wait'?) [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + "wait { a }\n",
+        "4:1: 'wait' must belong to a transition; start one with 'transition NAME' [CORAL001]",
+    ),
+    (HEADER + 'const S = "open\n', "3:11: unterminated string [CORAL001]"),
+    (HEADER + "const Z = 2.0 meters\n", "3:15: unknown unit 'meters' [CORAL001]"),
+    (
+        HEADER + PLACES + "transition t\n",
+        "4:1: transition 't' has no 'wait', 'action' or 'signal' clause [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + "transition t wait { a } wait { b }\n",
+        "4:25: transition 't' has two 'wait' clauses; merge them [CORAL001]",
+    ),
+    (
+        HEADER + "assert sometimes { a }\n",
+        "3:8: expected 'never', 'reachable' or 'bound' after 'assert', found 'sometimes' [CORAL001]",
+    ),
+    (
+        HEADER + "place p\ntransition t wait { p } action { ROMEO(DEPTH, 2.0) }\n",
+        "4:52: expected '->' after the command: map its replies with '-> { reply: place }', found '}' [CORAL001]",
+    ),
+    # names
+    (
+        HEADER + "place depth_ok = 1, done\ntransition t wait { dpeth_ok } signal { done }\n",
+        "4:21: unknown place 'dpeth_ok' (did you mean 'depth_ok'?) [CORAL002]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH, z = Z_OPP) -> { ack: b, error: c } }\n"
+        "const Z_OP = 2.0\n",
+        "4:51: unknown constant 'Z_OPP' (did you mean 'Z_OP'?) [CORAL002]",
+    ),
+    (HEADER + "place a\nplace a\n", "4:7: place 'a' is declared twice [CORAL003]"),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } signal { b }\ntransition t wait { b } signal { c }\n",
+        "5:1: transition 't' is declared twice [CORAL003]",
+    ),
+    (
+        HEADER + PLACES + "transition a wait { b } signal { c }\n",
+        "4:1: 'a' names both a place and a transition [CORAL003]",
+    ),
+    (
+        HEADER + PLACES + "transition t wait { a, a } signal { b }\n",
+        "4:24: place 'a' appears twice in 'wait'; write 'a*N' for N tokens [CORAL003]",
+    ),
+    (HEADER + "const K = 1\nconst K = 2\n", "4:1: constant 'K' is declared twice [CORAL003]"),
+    # values
+    (
+        HEADER + "place a = 1.5\n",
+        "3:11: initial tokens of 'a' must be a whole number, got 1.5 [CORAL005]",
+    ),
+    (
+        HEADER + PLACES + "transition t wait { a*0 } signal { b }\n",
+        "4:23: weight of 'a' must be at least 1, got 0 [CORAL005]",
+    ),
+    (
+        HEADER + "place a = 3 capacity 2\n",
+        "3:11: place 'a' starts with 3 tokens, more than its capacity 2 [CORAL005]",
+    ),
+    # header and profile
+    ("vehicle ROMEO\nplace a\n", "1:1: a mission file starts with 'mission NAME' [CORAL007]"),
+    ("mission m\nvehicle NAUTILUS\n", "2:1: no vehicle profile for 'NAUTILUS' [CORAL006]"),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROBOT(DEPTH, z = 2.0) -> { ack: b, error: c } }\n",
+        "4:32: this mission commands vehicle 'ROMEO', not 'ROBOT' [CORAL006]",
+    ),
+    # commands against the profile
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPHT, z = 2.0) -> { ack: b, error: c } }\n",
+        "4:40: unknown command 'DEPHT' for ROMEO (did you mean 'DEPTH'?) [CORAL101]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH, 2.0, 3.0) -> { ack: b, error: c } }\n",
+        "4:52: DEPTH takes 1 parameter, got 2 [CORAL102]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH, depth = 2.0) -> { ack: b, error: c } }\n",
+        "4:47: DEPTH has no parameter 'depth' [CORAL102]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH?, z = 2.0) -> { done: b, timeout: c } }\n",
+        "4:40: DEPTH? is missing parameter 'time_out' [CORAL102]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH, z = 2.0, z = 3.0) -> { ack: b, error: c } }\n",
+        "4:56: parameter 'z' given twice [CORAL102]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH, z = 2.0, 3.0) -> { ack: b, error: c } }\n",
+        "4:56: positional argument after a named one [CORAL102]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + 'transition t wait { a } action { ROMEO(DEPTH, z = "deep") -> { ack: b, error: c } }\n',
+        "4:51: parameter 'z' of DEPTH is a number (float), got text \"deep\" [CORAL103]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH, z = 90 deg) -> { ack: b, error: c } }\n",
+        "4:51: parameter 'z' of DEPTH is in m (length), got 'deg' (angle) [CORAL104]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH, z = -1.0) -> { ack: b, error: c } }\n",
+        "4:51: parameter 'z' of DEPTH must be in [0, 500] m, got -1 m [CORAL105]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH, z = 600 m) -> { ack: b, error: c } }\n",
+        "4:51: parameter 'z' of DEPTH must be in [0, 500] m, got 600 m [CORAL105]",
+    ),
+    (
+        HEADER + PLACES + "transition t wait { a } action { ROMEO(DEPTH?, z = 2.0, time_out = 0.5) "
+        "-> { done: b, timeout: c } }\n",
+        "4:68: parameter 'time_out' of DEPTH? must be in [1, 3600] s, got 0.5 s [CORAL105]",
+    ),
+    # replies
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH?, z = 2.0, time_out = 60) -> { done: b } }\n",
+        "4:40: DEPTH? can reply 'timeout', but transition 't' does not say where that reply goes [CORAL106]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH, z = 2.0) -> { ack: b, eror: c } }\n",
+        "4:69: DEPTH never replies 'eror' (did you mean 'error'?) [CORAL107]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH, z = 2.0) -> { ack: b, ack: c, error: c } }\n",
+        "4:69: reply 'ack' is mapped twice [CORAL108]",
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    TABLE,
+    ids=[row[1].split("[")[1][:-1] + f"-{i}" for i, row in enumerate(TABLE)],
+)
+def test_bad_snippet_gives_exact_diagnostic(text: str, expected: str) -> None:
+    assert _first(text) == expected
+
+
+def test_all_errors_of_a_file_in_one_run() -> None:
+    text = (
+        HEADER
+        + "place a = 1, b\n"
+        + "transition t1 wait { x } signal { b }\n"
+        + "transition t2 wait { a } action { ROMEO(DEPHT) -> { done: b } }\n"
+        + "transition t3 wait { a } action { ROMEO(DEPTH, z = 900) -> { ack: b, error: b } }\n"
+        + "place @\n"
+    )
+    result = compile_source(text, "m.coral")
+    codes = [d.code for d in result.errors]
+    assert codes == ["CORAL002", "CORAL101", "CORAL105", "CORAL001"]
+    assert result.net is None
+
+
+def test_rendered_diagnostic_shows_source_line_and_caret() -> None:
+    text = HEADER + "place depth_ok = 1, done\ntransition t wait { dpeth_ok } signal { done }\n"
+    result = compile_source(text, "pool.coral")
+    rendered = result.errors[0].render(result.sources)
+    assert rendered.splitlines() == [
+        "pool.coral:4:21: error: unknown place 'dpeth_ok' (did you mean 'depth_ok'?) [CORAL002]",
+        "   |",
+        " 4 | transition t wait { dpeth_ok } signal { done }",
+        "   |                     ^~~~~~~~",
+    ]
+
+
+def test_profile_notes_list_accepted_commands() -> None:
+    text = HEADER + PLACES + "transition t wait { a } action { ROMEO(DIVE) -> { ack: b } }\n"
+    error = compile_source(text, "m.coral").errors[0]
+    assert error.code == "CORAL101"
+    assert any("DEPTH?" in note and "GOTO" in note for note in error.notes)
+
+
+def test_unit_conversion_is_applied() -> None:
+    text = (
+        HEADER
+        + PLACES
+        + "transition t wait { a } action { ROMEO(DEPTH, z = 250 cm) -> { ack: b, error: c } }\n"
+    )
+    result = compile_source(text, "m.coral")
+    assert result.net is not None
+    command = result.net.transition("t").command
+    assert command is not None and command.params == (("z", 2.5),)
