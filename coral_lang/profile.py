@@ -8,6 +8,7 @@ documented in ``docs/profiles.md``; ROMEO's profile (Table 1 of the paper) is bu
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from importlib import resources as importlib_resources
@@ -134,13 +135,23 @@ def load_profile(path: str | Path) -> VehicleProfile:
 
 
 def load_bundled_profile(system: str) -> VehicleProfile:
-    """Load the bundled profile for ``system``; ProfileError if there is none."""
+    """Load the bundled profile for ``system``; ProfileError if there is none.
+
+    Profiles are immutable, so a loaded one is reused until its file changes: every
+    compile needs it, and YAML validation would otherwise dominate small compiles.
+    """
     path = bundled_profile_path(system)
     if path is None:
         known = ", ".join(bundled_profiles())
         raise ProfileError(
             system, "", f"no bundled profile for vehicle '{system}' (bundled: {known})"
         )
+    return _load_cached(str(path), path.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=16)
+def _load_cached(path: str, mtime_ns: int) -> VehicleProfile:
+    del mtime_ns  # part of the cache key only
     return load_profile(path)
 
 
