@@ -1,7 +1,9 @@
 """The syntax tree of a CORAL mission. Every node keeps the span of the text that made it.
 
 Spans are excluded from equality, so two trees compare equal when they say the same
-thing, wherever it was written: the printer's round-trip test relies on that.
+thing, wherever it was written: the printer's round-trip test relies on that. Nodes
+are slotted, not frozen: a large mission has a hundred thousand of them, and frozen
+dataclasses cost three times as much to build. Nothing mutates a tree once parsed.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from coral_lang.diagnostics import Span
 _NOWHERE = Span("<generated>", 0, 0, 0, 0)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Number:
     """A numeric literal, possibly with a unit: ``2.0``, ``250 cm``, ``-3``."""
 
@@ -23,7 +25,7 @@ class Number:
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class String:
     """A string literal."""
 
@@ -31,7 +33,7 @@ class String:
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Name:
     """A reference to a constant by name."""
 
@@ -42,7 +44,7 @@ class Name:
 Value = Number | String | Name
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class TokenRef:
     """A place with an optional arc weight or token count: ``p`` or ``p*2``."""
 
@@ -51,7 +53,7 @@ class TokenRef:
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Const:
     """``const NAME = value``."""
 
@@ -60,7 +62,7 @@ class Const:
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class PlaceDecl:
     """One place of a ``place`` statement: ``name [= tokens] [capacity k]``."""
 
@@ -70,7 +72,7 @@ class PlaceDecl:
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Places:
     """``place a, b = 2, c capacity 3``."""
 
@@ -78,7 +80,7 @@ class Places:
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Final:
     """``final { p, q*2 }``: a proper end of the mission."""
 
@@ -86,7 +88,7 @@ class Final:
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Arg:
     """A command argument, positional (``name`` None) or named."""
 
@@ -95,7 +97,7 @@ class Arg:
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class ReplyMap:
     """``reply: place``, ``reply: { a, b }`` or ``reply: ignore`` (``targets`` None)."""
 
@@ -104,7 +106,7 @@ class ReplyMap:
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Action:
     """``SYSTEM(COMMAND, args...) -> { reply: place, ... }``."""
 
@@ -116,7 +118,7 @@ class Action:
     command_span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class TransitionDecl:
     """``transition NAME [priority N]`` with ``wait``, optional ``action``, ``signal``."""
 
@@ -128,7 +130,7 @@ class TransitionDecl:
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Include:
     """``include "other.coral"``."""
 
@@ -144,7 +146,7 @@ class AssertKind(enum.Enum):
     BOUND = "bound"
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class AssertDecl:
     """``assert never {a, b}``, ``assert reachable {p}``, ``assert bound p <= k``."""
 
@@ -157,7 +159,7 @@ class AssertDecl:
 Declaration = Const | Places | Final | TransitionDecl | Include | AssertDecl
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Mission:
     """One source file: an optional header and its declarations."""
 

@@ -3,12 +3,18 @@
 The language is free-form: line breaks are white space, statements start with a
 keyword. ``#`` starts a comment to the end of the line. A command name may end in
 ``?`` (``DEPTH?``); the parser decides where such a name is allowed.
+
+One compiled regular expression does the scanning: a mission of 10,000 transitions
+is a quarter of a million tokens, and a per-character Python loop was the slowest
+part of compiling it.
 """
 
 from __future__ import annotations
 
+import bisect
 import enum
-from dataclasses import dataclass
+import re
+from typing import NamedTuple
 
 from coral_lang.diagnostics import Diagnostic, Severity, Span
 
@@ -58,16 +64,48 @@ _PUNCTUATION = {
     "*": Kind.STAR,
     ":": Kind.COLON,
     "/": Kind.SLASH,
+    "-": Kind.MINUS,
+    "->": Kind.ARROW,
+    "<=": Kind.LE,
 }
 
+# White space and comments are skipped as part of each match, so the Python loop runs
+# once per token; lines are found afterwards by bisecting the newline offsets.
+_SCANNER = re.compile(
+    r"""
+    (?:[ \t\r\n\f\v]+|\#[^\n]*)*
+    (?:
+      (?P<ident>[^\W\d]\w*\??)
+    | (?P<number>(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?)
+    | (?P<string>"(?:[^"\\\n]|\\.)*"?)
+    | (?P<punct>->|<=|[{}(),=*:/-])
+    | (?P<error>.)
+    | (?P<end>$)
+    )
+    """,
+    re.VERBOSE,
+)
 
-@dataclass(frozen=True)
-class Token:
-    """A token with its text and where it is."""
+_ESCAPE = re.compile(r"\\(.)")
+_NEWLINE = re.compile("\n")
+_ESCAPES = {'"': '"', "\\": "\\", "n": "\n", "t": "\t"}
+
+
+class Token(NamedTuple):
+    """A token with its text and where it is (the same position fields as `Span`)."""
 
     kind: Kind
     text: str
-    span: Span
+    file: str
+    line: int
+    col: int
+    end_line: int
+    end_col: int
+
+    @property
+    def span(self) -> Span:
+        """Where the token is, as a `Span` (built on demand: most tokens never need one)."""
+        return Span(self.file, self.line, self.col, self.end_line, self.end_col)
 
     def describe(self) -> str:
         """How an error message names this token."""
@@ -82,119 +120,48 @@ def tokenize(text: str, file: str) -> tuple[list[Token], list[Diagnostic]]:
     """Split ``text`` into tokens; bad characters become diagnostics, never exceptions."""
     tokens: list[Token] = []
     diagnostics: list[Diagnostic] = []
-    line, col, i, n = 1, 1, 0, len(text)
-
-    def span(start_line: int, start_col: int, length: int) -> Span:
-        return Span(file, start_line, start_col, start_line, start_col + length)
-
-    while i < n:
-        ch = text[i]
-        if ch == "\n":
-            line, col, i = line + 1, 1, i + 1
+    append = tokens.append
+    newlines = [m.start() for m in _NEWLINE.finditer(text)]
+    for match in _SCANNER.finditer(text):
+        group = match.lastgroup
+        assert group is not None
+        start, end = match.span(group)
+        line = bisect.bisect_left(newlines, start) + 1
+        col = start - (newlines[line - 2] + 1 if line > 1 else 0) + 1
+        if group == "ident":
+            append(Token(Kind.IDENT, match.group(group), file, line, col, line, col + end - start))
             continue
-        if ch in " \t\r\f\v":
-            i, col = i + 1, col + 1
+        if group == "punct":
+            lexeme = match.group(group)
+            append(Token(_PUNCTUATION[lexeme], lexeme, file, line, col, line, col + end - start))
             continue
-        if ch == "#":
-            while i < n and text[i] != "\n":
-                i += 1
-            continue
-        start = i
-        if ch.isalpha() or ch == "_":
-            while i < n and (text[i].isalnum() or text[i] == "_"):
-                i += 1
-            if i < n and text[i] == "?":
-                i += 1
-            word = text[start:i]
-            tokens.append(Token(Kind.IDENT, word, span(line, col, i - start)))
-            col += i - start
-            continue
-        if ch.isdigit() or (ch == "." and i + 1 < n and text[i + 1].isdigit()):
-            kind, i = _number(text, i)
-            tokens.append(Token(kind, text[start:i], span(line, col, i - start)))
-            col += i - start
-            continue
-        if ch == '"':
-            value, i, closed = _string(text, i)
-            length = i - start
+        if group == "end":
+            append(Token(Kind.EOF, "", file, line, col, line, col + 1))
+            break
+        lexeme = match.group(group)
+        span = Span(file, line, col, line, col + end - start)
+        if group == "number":
+            kind = Kind.INT if lexeme.isdigit() else Kind.FLOAT
+            append(Token(kind, lexeme, *span))
+        elif group == "string":
+            closed = len(lexeme) >= 2 and lexeme.endswith('"') and not _escaped_quote_at_end(lexeme)
+            body = lexeme[1:-1] if closed else lexeme[1:]
+            value = _ESCAPE.sub(lambda m: _ESCAPES.get(m.group(1), m.group(0)), body)
             if not closed:
                 diagnostics.append(
-                    Diagnostic(
-                        Severity.ERROR, "CORAL001", "unterminated string", span(line, col, length)
-                    )
+                    Diagnostic(Severity.ERROR, "CORAL001", "unterminated string", span)
                 )
-            tokens.append(Token(Kind.STRING, value, span(line, col, length)))
-            col += length
-            continue
-        if text.startswith("->", i):
-            tokens.append(Token(Kind.ARROW, "->", span(line, col, 2)))
-            i, col = i + 2, col + 2
-            continue
-        if text.startswith("<=", i):
-            tokens.append(Token(Kind.LE, "<=", span(line, col, 2)))
-            i, col = i + 2, col + 2
-            continue
-        if ch == "-":
-            tokens.append(Token(Kind.MINUS, "-", span(line, col, 1)))
-            i, col = i + 1, col + 1
-            continue
-        if ch in _PUNCTUATION:
-            tokens.append(Token(_PUNCTUATION[ch], ch, span(line, col, 1)))
-            i, col = i + 1, col + 1
-            continue
-        shown = ch if ch.isprintable() else repr(ch)
-        diagnostics.append(
-            Diagnostic(
-                Severity.ERROR, "CORAL001", f"unexpected character '{shown}'", span(line, col, 1)
+            append(Token(Kind.STRING, value, *span))
+        else:
+            shown = lexeme if lexeme.isprintable() else repr(lexeme)
+            diagnostics.append(
+                Diagnostic(Severity.ERROR, "CORAL001", f"unexpected character '{shown}'", span)
             )
-        )
-        tokens.append(Token(Kind.ERROR, ch, span(line, col, 1)))
-        i, col = i + 1, col + 1
-    tokens.append(Token(Kind.EOF, "", span(line, col, 1)))
+            append(Token(Kind.ERROR, lexeme, *span))
     return tokens, diagnostics
 
 
-def _number(text: str, i: int) -> tuple[Kind, int]:
-    n = len(text)
-    kind = Kind.INT
-    while i < n and text[i].isdigit():
-        i += 1
-    if i < n and text[i] == "." and i + 1 < n and text[i + 1].isdigit():
-        kind = Kind.FLOAT
-        i += 1
-        while i < n and text[i].isdigit():
-            i += 1
-    elif i < n and text[i] == "." and not (i + 1 < n and text[i + 1].isalpha()):
-        kind = Kind.FLOAT  # "2." is a float
-        i += 1
-    if i < n and text[i] in "eE":
-        j = i + 1
-        if j < n and text[j] in "+-":
-            j += 1
-        if j < n and text[j].isdigit():
-            kind = Kind.FLOAT
-            i = j
-            while i < n and text[i].isdigit():
-                i += 1
-    return kind, i
-
-
-_ESCAPES = {'"': '"', "\\": "\\", "n": "\n", "t": "\t"}
-
-
-def _string(text: str, i: int) -> tuple[str, int, bool]:
-    """Read a string starting at the opening quote; returns (value, end, closed)."""
-    out: list[str] = []
-    i += 1
-    n = len(text)
-    while i < n and text[i] != "\n":
-        ch = text[i]
-        if ch == '"':
-            return "".join(out), i + 1, True
-        if ch == "\\" and i + 1 < n and text[i + 1] in _ESCAPES:
-            out.append(_ESCAPES[text[i + 1]])
-            i += 2
-            continue
-        out.append(ch)
-        i += 1
-    return "".join(out), i, False
+def _escaped_quote_at_end(lexeme: str) -> bool:
+    """Whether the final quote of ``lexeme`` is escaped (so the string is unterminated)."""
+    backslashes = len(lexeme) - 1 - len(lexeme[:-1].rstrip("\\"))
+    return backslashes % 2 == 1

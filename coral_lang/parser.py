@@ -22,7 +22,8 @@ def parse(text: str, file: str = "<mission>") -> tuple[ast.Mission, list[Diagnos
     return parser.mission(), parser.diagnostics
 
 
-def _join(a: Span, b: Span) -> Span:
+def _join(a: Span | Token, b: Span | Token) -> Span:
+    """The span from the start of ``a`` to the end of ``b`` (tokens or spans)."""
     return Span(a.file, a.line, a.col, b.end_line, b.end_col)
 
 
@@ -32,25 +33,24 @@ class _Parser:
         self.pos = 0
         self.file = file
         self.diagnostics = diagnostics
+        # The current and previous token are plain attributes, not properties: they are
+        # read several times per token, and that dominated parsing of large missions.
+        self.tok: Token = tokens[0]
+        self.previous: Token = tokens[0]
 
     # -- token helpers ----------------------------------------------------------------
 
-    @property
-    def tok(self) -> Token:
-        return self.tokens[self.pos]
-
-    @property
-    def previous(self) -> Token:
-        return self.tokens[max(self.pos - 1, 0)]
-
     def advance(self) -> Token:
-        token = self.tokens[self.pos]
+        token = self.tok
         if token.kind is not Kind.EOF:
             self.pos += 1
+            self.previous = token
+            self.tok = self.tokens[self.pos]
         return token
 
     def at(self, kind: Kind, text: str | None = None) -> bool:
-        return self.tok.kind is kind and (text is None or self.tok.text == text)
+        token = self.tok
+        return token.kind is kind and (text is None or token.text == text)
 
     def at_keyword(self, word: str) -> bool:
         return self.at(Kind.IDENT, word)
@@ -125,7 +125,7 @@ class _Parser:
                                 keyword.span,
                             )
                         )
-                    name, name_span = token.text, _join(keyword.span, token.span)
+                    name, name_span = token.text, _join(keyword, token)
                 elif self.at_keyword("vehicle"):
                     keyword = self.advance()
                     token = self.ident("a vehicle name")
@@ -135,7 +135,7 @@ class _Parser:
                                 Severity.ERROR, "CORAL001", "'vehicle' given twice", keyword.span
                             )
                         )
-                    vehicle, vehicle_span = token.text, _join(keyword.span, token.span)
+                    vehicle, vehicle_span = token.text, _join(keyword, token)
                 else:
                     declarations.append(self.declaration())
             except _SyntaxError:
@@ -186,7 +186,7 @@ class _Parser:
             value = ast.String(token.text, token.span)
         else:
             value = self.number(f"as the value of '{name.text}'")
-        return ast.Const(name.text, value, _join(keyword.span, self.previous.span))
+        return ast.Const(name.text, value, _join(keyword, self.previous))
 
     def number(self, context: str) -> ast.Number:
         minus = self.accept(Kind.MINUS)
@@ -198,7 +198,7 @@ class _Parser:
             value = -value
         start = minus.span if minus is not None else token.span
         unit = self.unit(token)
-        return ast.Number(value, unit, _join(start, self.previous.span))
+        return ast.Number(value, unit, _join(start, self.previous))
 
     def unit(self, number: Token) -> str | None:
         """A unit written right after a number on the same line (``2.0 m``, ``0.5 m/s``)."""
@@ -217,7 +217,7 @@ class _Parser:
         if not units.is_unit(name):
             raise self.error(
                 f"unknown unit '{name}'{did_you_mean(name, units.UNITS)}",
-                _join(token.span, self.previous.span),
+                _join(token, self.previous),
                 (f"known units: {', '.join(units.UNITS)}",),
             )
         return name
@@ -234,7 +234,7 @@ class _Parser:
         decls = [self.place_decl()]
         while self.accept(Kind.COMMA):
             decls.append(self.place_decl())
-        return ast.Places(tuple(decls), _join(keyword.span, self.previous.span))
+        return ast.Places(tuple(decls), _join(keyword, self.previous))
 
     def place_decl(self) -> ast.PlaceDecl:
         name = self.ident("a place name")
@@ -243,35 +243,41 @@ class _Parser:
             initial = self.count(f"as the initial tokens of '{name.text}'")
         if self.accept(Kind.IDENT, "capacity"):
             capacity = self.count(f"as the capacity of '{name.text}'")
-        return ast.PlaceDecl(name.text, initial, capacity, _join(name.span, self.previous.span))
+        return ast.PlaceDecl(name.text, initial, capacity, _join(name, self.previous))
 
     def token_set(self, context: str) -> tuple[ast.TokenRef, ...]:
         """``{ p, q*2 }`` (possibly empty)."""
         self.expect(Kind.LBRACE, context)
         refs: list[ast.TokenRef] = []
-        if not self.at(Kind.RBRACE):
+        if self.tok.kind is not Kind.RBRACE:
             refs.append(self.token_ref())
-            while self.accept(Kind.COMMA):
+            while self.tok.kind is Kind.COMMA:
+                self.advance()
                 refs.append(self.token_ref())
         self.expect(Kind.RBRACE, "to close the place set (places are separated by ',')")
         return tuple(refs)
 
     def token_ref(self) -> ast.TokenRef:
-        name = self.ident("a place name")
+        name = self.tok
+        if name.kind is Kind.IDENT and name.text not in KEYWORDS and name.text[-1] != "?":
+            self.advance()  # the common case, without ident()'s checks and messages
+        else:
+            name = self.ident("a place name")
         weight = None
-        if self.accept(Kind.STAR):
+        if self.tok.kind is Kind.STAR:
+            self.advance()
             weight = self.count(f"as the weight of '{name.text}'")
-        return ast.TokenRef(name.text, weight, _join(name.span, self.previous.span))
+        return ast.TokenRef(name.text, weight, _join(name, self.previous))
 
     def final(self) -> ast.Final:
         keyword = self.advance()
         tokens = self.token_set("after 'final'")
-        return ast.Final(tokens, _join(keyword.span, self.previous.span))
+        return ast.Final(tokens, _join(keyword, self.previous))
 
     def include(self) -> ast.Include:
         keyword = self.advance()
         path = self.expect(Kind.STRING, "after 'include' (a file name in double quotes)")
-        return ast.Include(path.text, _join(keyword.span, path.span))
+        return ast.Include(path.text, _join(keyword, path))
 
     def assertion(self) -> ast.AssertDecl:
         keyword = self.advance()
@@ -283,7 +289,7 @@ class _Parser:
                 ast.AssertKind(kind_token.text),
                 tokens,
                 None,
-                _join(keyword.span, self.previous.span),
+                _join(keyword, self.previous),
             )
         if self.at_keyword("bound"):
             self.advance()
@@ -294,7 +300,7 @@ class _Parser:
             self.expect(Kind.LE, "in 'assert bound PLACE <= N'")
             bound = self.count("as the bound")
             return ast.AssertDecl(
-                ast.AssertKind.BOUND, tokens, bound, _join(keyword.span, self.previous.span)
+                ast.AssertKind.BOUND, tokens, bound, _join(keyword, self.previous)
             )
         raise self.error(
             f"expected 'never', 'reachable' or 'bound' after 'assert', "
@@ -304,7 +310,7 @@ class _Parser:
     def transition(self) -> ast.TransitionDecl:
         keyword = self.advance()
         name = self.ident("a transition name")
-        header = _join(keyword.span, name.span)
+        header = _join(keyword, name)
         priority = None
         if self.accept(Kind.IDENT, "priority"):
             priority = self.count(f"as the priority of '{name.text}'")
@@ -371,12 +377,12 @@ class _Parser:
             command.text,
             tuple(args),
             tuple(replies),
-            _join(open_brace.span, close.span),
+            _join(open_brace, close),
             command.span,
         )
 
     def arg(self) -> ast.Arg:
-        start = self.tok.span
+        start = self.tok
         name: str | None = None
         if (
             self.tok.kind is Kind.IDENT
@@ -386,7 +392,7 @@ class _Parser:
             name = self.advance().text
             self.advance()
         value = self.value("as an argument")
-        return ast.Arg(name, value, _join(start, self.previous.span))
+        return ast.Arg(name, value, _join(start, self.previous))
 
     def value(self, context: str) -> ast.Value:
         if self.at(Kind.STRING):
@@ -407,4 +413,4 @@ class _Parser:
             targets = self.token_set(f"after '{reply.text}:'")
         else:
             targets = (self.token_ref(),)
-        return ast.ReplyMap(reply.text, targets, _join(reply.span, self.previous.span))
+        return ast.ReplyMap(reply.text, targets, _join(reply, self.previous))
