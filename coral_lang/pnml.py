@@ -1,0 +1,998 @@
+"""PNML (ISO/IEC 15909-2) import and export of place/transition nets.
+
+PNML is how Petri-net tools exchange nets: the Model Checking Contest models, TAPAAL,
+GreatSPN and others all read and write it. coral reads the P/T flavour (net type
+``http://www.pnml.org/version-2009/grammar/ptnet``) into its one `Net` model, so every
+analysis runs on foreign nets unchanged, and writes any `Net` back out so other tools can
+check coral's results.
+
+Reading is defensive because PNML files come from other people's tools: the XML is parsed
+with ``defusedxml`` (no DTD, no entity expansion, no external references), and every fault
+is a `PnmlError` naming the file, line, column, element and id. The format notes (what is
+accepted, what is refused and why) are in ``docs/pnml.md``.
+
+What survives a round trip ``parse_pnml(to_pnml(net))``: places, transitions, arcs with
+their weights, initial markings, labels (stripped of surrounding white space) and every
+name. Mission-only data (place and transition kinds, capacities, commands, replies,
+priorities, resources, spans, final markings, assertions, vehicle, sources) travels in
+``<toolspecific tool="coral" version="1">`` blocks that other tools ignore.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+from xml.sax import SAXParseException
+from xml.sax.saxutils import escape, quoteattr
+
+from defusedxml import DefusedXmlException, DTDForbidden, EntitiesForbidden
+from defusedxml.expatreader import DefusedExpatParser
+
+from coral_lang.diagnostics import PnmlError, Span, did_you_mean
+from coral_lang.net import (
+    Assertion,
+    AssertKind,
+    Command,
+    FinalMarking,
+    Net,
+    NetError,
+    Place,
+    PlaceKind,
+    Transition,
+    TransitionKind,
+    Value,
+)
+
+__all__ = [
+    "CORAL_TOOL",
+    "CORAL_TOOL_VERSION",
+    "PNML_NAMESPACE",
+    "PTNET_TYPE",
+    "parse_pnml",
+    "read_pnml",
+    "to_pnml",
+    "write_pnml",
+]
+
+PNML_NAMESPACE = "http://www.pnml.org/version-2009/grammar/pnml"
+PTNET_TYPE = "http://www.pnml.org/version-2009/grammar/ptnet"
+CORAL_TOOL = "coral"
+CORAL_TOOL_VERSION = "1"
+
+# Other net types people try to feed us, so the refusal can say what the file is.
+_KNOWN_TYPES = {
+    "http://www.pnml.org/version-2009/grammar/symmetricnet": "a symmetric (coloured) net",
+    "http://www.pnml.org/version-2009/grammar/highlevelnet": "a high-level (coloured) net",
+    "http://www.pnml.org/version-2009/grammar/pt-hlpng": "a P/T net in high-level notation",
+}
+# Elements that only high-level (coloured) nets have; a ptnet holding one is mislabelled.
+_HIGH_LEVEL = frozenset(
+    {"declaration", "declarations", "hlinitialMarking", "hlinscription", "condition"}
+)
+_INTEGER = re.compile(r"[+-]?[0-9]+", re.ASCII)
+# Ids written verbatim: a conservative, ASCII-only subset of XML's NCName that every PNML
+# tool accepts. Other names get a sanitised id; their real name rides in a coral block.
+_SAFE_ID = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*", re.ASCII)
+_UNSAFE_ID_CHAR = re.compile(r"[^A-Za-z0-9_.\-]", re.ASCII)
+# Characters XML 1.0 cannot carry at all, not even as character references.
+_NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
+
+
+_Kind = TypeVar("_Kind", PlaceKind, TransitionKind, AssertKind)
+
+# ---------------------------------------------------------------------------------------
+# Reading
+# ---------------------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class _Element:
+    """One XML element with its source position; namespaces are dropped (see docs)."""
+
+    tag: str
+    attrs: dict[str, str]
+    line: int
+    col: int
+    children: list[_Element] = field(default_factory=list)
+    chunks: list[str] = field(default_factory=list)
+
+    @property
+    def text(self) -> str:
+        return "".join(self.chunks)
+
+    def child(self, tag: str) -> _Element | None:
+        for c in self.children:
+            if c.tag == tag:
+                return c
+        return None
+
+    def describe(self) -> str:
+        ident = self.attrs.get("id")
+        return f"<{self.tag}> '{ident}'" if ident is not None else f"<{self.tag}>"
+
+
+class _TreeBuilder:
+    """Builds `_Element`s with line numbers from expat events (ElementTree keeps none).
+
+    Foreign ``<toolspecific>`` blocks are skipped whole: they can hold anything, and
+    large ones (NUPN unit trees) are not worth keeping in memory.
+    """
+
+    def __init__(self) -> None:
+        self.root = _Element("#document", {}, 0, 0)
+        self.expat: Any = None  # the pyexpat parser, for positions
+        self._stack = [self.root]
+        self._skip = 0
+
+    def start(self, name: str, attrs: dict[str, str]) -> None:
+        if self._skip:
+            self._skip += 1
+            return
+        # Namespaced names arrive as "uri local"; PNML is read by local names only.
+        element = _Element(
+            name.rpartition(" ")[2],
+            {key.rpartition(" ")[2]: value for key, value in attrs.items()},
+            self.expat.CurrentLineNumber,
+            self.expat.CurrentColumnNumber + 1,
+        )
+        self._stack[-1].children.append(element)
+        self._stack.append(element)
+        if element.tag == "toolspecific" and not _is_coral_block(element):
+            self._skip = 1
+
+    def end(self, name: str) -> None:
+        if self._skip:
+            self._skip -= 1
+            if self._skip:
+                return
+        self._stack.pop()
+
+    def data(self, content: str) -> None:
+        if not self._skip:
+            self._stack[-1].chunks.append(content)
+
+
+class _SafeParser(DefusedExpatParser):  # type: ignore[misc]
+    """defusedxml's expat driver (no DTD, entities or external references), with the
+    element events wired straight to `_TreeBuilder`.
+
+    The SAX layer in between would build attribute objects and locators per element
+    and roughly double the parse time of a large net; the defusing handlers that
+    defusedxml installs in `reset` are kept untouched.
+    """
+
+    def __init__(self, builder: _TreeBuilder) -> None:
+        super().__init__(
+            namespaceHandling=1, forbid_dtd=True, forbid_entities=True, forbid_external=True
+        )
+        self._builder = builder
+
+    def reset(self) -> None:
+        super().reset()
+        expat = self._parser
+        expat.buffer_text = True
+        expat.namespace_prefixes = False  # names as "uri local", never "uri local prefix"
+        expat.StartElementHandler = self._builder.start
+        expat.EndElementHandler = self._builder.end
+        expat.CharacterDataHandler = self._builder.data
+        self._builder.expat = expat
+
+
+def _is_coral_block(element: _Element) -> bool:
+    return (
+        element.attrs.get("tool") == CORAL_TOOL
+        and element.attrs.get("version") == CORAL_TOOL_VERSION
+    )
+
+
+def read_pnml(path: str | os.PathLike[str], *, net_id: str | None = None) -> Net:
+    """Read a PNML file holding a P/T net.
+
+    Args:
+        path: The ``.pnml`` file.
+        net_id: Which ``<net>`` to read when the file holds several; a file with more
+            than one net and no ``net_id`` is refused rather than silently cut short.
+
+    Returns:
+        The net; see `parse_pnml` for how PNML maps to `Net`.
+
+    Raises:
+        PnmlError: The file cannot be read, is not well-formed or safe XML, is not a P/T
+            net, or is inconsistent. The message names the file, line and element.
+    """
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as e:
+        raise PnmlError(f"{os.fspath(path)}: cannot read: {e.strerror or e}") from e
+    return parse_pnml(data, os.fspath(path), net_id=net_id)
+
+
+def parse_pnml(data: bytes | str, file: str = "<pnml>", *, net_id: str | None = None) -> Net:
+    """Parse PNML text into a `Net`.
+
+    Place and transition ids become `Place.name` / `Transition.name`, ``<name>`` texts
+    become their ``label``. Nested pages are flattened in document order; reference
+    nodes resolve to the node they refer to; parallel arcs add their weights. Foreign
+    ``<toolspecific>`` blocks are ignored, coral's own restore what `to_pnml` stored.
+
+    Args:
+        data: The document; bytes are decoded as the XML declaration says, a str is
+            taken as already decoded.
+        file: Name used in error messages.
+        net_id: Which ``<net>`` to read when the document holds several.
+
+    Returns:
+        The net, named after the ``<net>`` id.
+
+    Raises:
+        PnmlError: On any fault, with ``file:line:col`` and the element at fault.
+    """
+    root = _parse_xml(data, file)
+    return _Reader(file).read(root, net_id)
+
+
+def _parse_xml(data: bytes | str, file: str) -> _Element:
+    builder = _TreeBuilder()
+    parser = _SafeParser(builder)
+    try:
+        parser.feed(data)
+        parser.close()
+    except SAXParseException as e:
+        where = f"{file}:{e.getLineNumber()}:{(e.getColumnNumber() or 0) + 1}"
+        raise PnmlError(f"{where}: not well-formed XML: {e.getMessage()}") from None
+    except DTDForbidden as e:
+        where = f"{file}:{parser.getLineNumber()}"
+        system = f" (system id '{e.sysid}')" if e.sysid else ""
+        raise PnmlError(
+            f"{where}: refused a <!DOCTYPE {e.name}> declaration{system}: PNML needs no DTD,"
+            " and DTDs can carry entity bombs and external references"
+        ) from None
+    except EntitiesForbidden as e:
+        raise PnmlError(
+            f"{file}:{parser.getLineNumber()}: refused entity declaration '{e.name}'"
+        ) from None
+    except DefusedXmlException as e:
+        raise PnmlError(
+            f"{file}:{parser.getLineNumber()}: refused unsafe XML construct: {e}"
+        ) from None
+    if not builder.root.children:  # expat reports this itself; kept as a safety net
+        raise PnmlError(f"{file}: empty document")
+    return builder.root.children[0]
+
+
+class _Reader:
+    """Turns the element tree of one PNML document into a `Net`."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+        self.ids: dict[str, _Element] = {}
+
+    def error(self, element: _Element, message: str) -> PnmlError:
+        return PnmlError(f"{self.file}:{element.line}:{element.col}: {message}")
+
+    def read(self, root: _Element, net_id: str | None) -> Net:
+        if root.tag != "pnml":
+            raise self.error(root, f"root element is <{root.tag}>, expected <pnml>")
+        nets = [c for c in root.children if c.tag == "net"]
+        if not nets:
+            raise self.error(root, "no <net> element in <pnml>")
+        net = self.select(root, nets, net_id)
+        self.check_type(net)
+        return self.read_net(net)
+
+    def select(self, root: _Element, nets: list[_Element], net_id: str | None) -> _Element:
+        ids = [n.attrs.get("id", "") for n in nets]
+        if net_id is None:
+            if len(nets) > 1:
+                listed = ", ".join(f"'{i}'" for i in ids)
+                raise self.error(
+                    root,
+                    f"the file holds {len(nets)} nets ({listed});"
+                    " pass net_id to choose which one to read",
+                )
+            return nets[0]
+        for net, ident in zip(nets, ids, strict=True):
+            if ident == net_id:
+                return net
+        raise self.error(root, f"no <net> with id '{net_id}'{did_you_mean(net_id, ids)}")
+
+    def check_type(self, net: _Element) -> None:
+        ident = net.attrs.get("id", "?")
+        net_type = net.attrs.get("type")
+        if net_type is None:
+            raise self.error(net, f"<net> '{ident}' has no type; coral reads '{PTNET_TYPE}'")
+        net_type = net_type.strip()
+        if net_type != PTNET_TYPE:
+            what = _KNOWN_TYPES.get(net_type, "not a P/T net")
+            raise self.error(
+                net,
+                f"<net> '{ident}' has type '{net_type}' ({what});"
+                f" coral reads only P/T nets of type '{PTNET_TYPE}'",
+            )
+
+    # -- the net ------------------------------------------------------------------------
+
+    def read_net(self, net: _Element) -> Net:
+        net_ident = self.require_id(net)
+        self.refuse_high_level(net, net)
+        nodes = list(self.walk(net))
+        for element in nodes:
+            if element.tag in _ID_ELEMENTS:
+                self.require_id(element)
+                self.refuse_high_level(element, net)
+
+        places: dict[str, Place] = {}  # by PNML id
+        place_names: set[str] = set()
+        transition_elements: list[_Element] = []
+        transition_names: dict[str, str] = {}  # PNML id -> Net name
+        arcs: list[_Element] = []
+        for element in nodes:
+            if element.tag == "place":
+                place = self.read_place(element)
+                if place.name in place_names:
+                    raise self.error(element, f"two places are named '{place.name}'")
+                place_names.add(place.name)
+                places[element.attrs["id"]] = place
+            elif element.tag == "transition":
+                transition_elements.append(element)
+                transition_names[element.attrs["id"]] = self.coral_name(element)
+            elif element.tag == "arc":
+                arcs.append(element)
+
+        resolved = self.resolve_references(nodes)
+        inputs: dict[str, dict[str, int]] = {i: {} for i in transition_names}
+        outputs: dict[str, dict[str, int]] = {i: {} for i in transition_names}
+        for arc in arcs:
+            source, target = self.arc_ends(arc, resolved)
+            weight = self.read_weight(arc)
+            if source.tag == "place" and target.tag == "transition":
+                bucket = inputs[target.attrs["id"]]
+                place_name = places[source.attrs["id"]].name
+            elif source.tag == "transition" and target.tag == "place":
+                bucket = outputs[source.attrs["id"]]
+                place_name = places[target.attrs["id"]].name
+            else:
+                raise self.error(
+                    arc,
+                    f"<arc> '{arc.attrs['id']}' joins {source.tag} '{source.attrs['id']}'"
+                    f" to {target.tag} '{target.attrs['id']}'; an arc must join a place"
+                    " and a transition",
+                )
+            bucket[place_name] = bucket.get(place_name, 0) + weight
+
+        transitions = []
+        for element in transition_elements:
+            ident = element.attrs["id"]
+            transitions.append(
+                self.read_transition(
+                    element,
+                    transition_names[ident],
+                    tuple(inputs[ident].items()),
+                    tuple(outputs[ident].items()),
+                )
+            )
+        extras = self.read_net_block(net)
+        try:
+            return Net(
+                name=self.coral_name(net),
+                places=tuple(places.values()),
+                transitions=tuple(transitions),
+                finals=extras.finals,
+                assertions=extras.assertions,
+                vehicle=extras.vehicle,
+                sources=extras.sources,
+            )
+        except NetError as e:
+            raise self.error(net, f"inconsistent net '{net_ident}': {e}") from None
+
+    def walk(self, net: _Element) -> Iterator[_Element]:
+        """Every element under ``net`` that matters, pages flattened in document order.
+
+        Also registers ids, so duplicates are caught wherever they are.
+        """
+        stack = list(reversed(net.children))
+        while stack:
+            element = stack.pop()
+            if element.tag == "toolspecific":
+                continue
+            ident = element.attrs.get("id")
+            if ident is not None and element.tag in _ID_ELEMENTS:
+                first = self.ids.get(ident)
+                if first is not None:
+                    raise self.error(
+                        element,
+                        f"duplicate id '{ident}' on <{element.tag}>; first used by"
+                        f" <{first.tag}> on line {first.line}",
+                    )
+                self.ids[ident] = element
+            yield element
+            if element.tag == "page":
+                stack.extend(reversed(element.children))
+
+    def refuse_high_level(self, element: _Element, net: _Element) -> None:
+        """Refuse coloured-net content in a net whose type says P/T."""
+        for child in element.children:
+            if child.tag in _HIGH_LEVEL or (child.tag == "type" and element.tag == "place"):
+                raise self.error(
+                    child,
+                    f"<{child.tag}> in {element.describe()} belongs to high-level (coloured)"
+                    f" nets, but <net> '{net.attrs.get('id')}' is typed ptnet;"
+                    " coral reads only P/T nets",
+                )
+
+    def require_id(self, element: _Element) -> str:
+        ident = element.attrs.get("id")
+        if ident is None or not ident.strip():
+            raise self.error(element, f"<{element.tag}> has no id")
+        return ident
+
+    def label(self, element: _Element) -> str:
+        name = element.child("name")
+        if name is None:
+            return ""
+        text = name.child("text")
+        return "" if text is None else text.text.strip()
+
+    def read_place(self, element: _Element) -> Place:
+        ident = element.attrs["id"]
+        initial = 0
+        marking = element.child("initialMarking")
+        if marking is not None:
+            initial = self.read_count(marking, f"initial marking of <place> '{ident}'", 0)
+        name = self.coral_name(element)
+        block = _coral_block(element)
+        info = block.child("place") if block is not None else None
+        if block is None or info is None:
+            return Place(name=name, initial=initial, label=self.label(element))
+        return Place(
+            name=name,
+            initial=initial,
+            label=self.label(element),
+            kind=self.enum(info, "kind", PlaceKind, PlaceKind.MISSION),
+            capacity=self.optional_int(info, "capacity"),
+            span=self.span(block),
+            resources=self.resources(block),
+            pending_of=info.attrs.get("pending-of"),
+            complement_of=info.attrs.get("complement-of"),
+        )
+
+    def read_transition(
+        self,
+        element: _Element,
+        name: str,
+        inputs: tuple[tuple[str, int], ...],
+        outputs: tuple[tuple[str, int], ...],
+    ) -> Transition:
+        label = self.label(element)
+        block = _coral_block(element)
+        info = block.child("transition") if block is not None else None
+        if block is None or info is None:
+            return Transition(name=name, inputs=inputs, outputs=outputs, label=label)
+        return Transition(
+            name=name,
+            inputs=inputs,
+            outputs=outputs,
+            label=label,
+            kind=self.enum(info, "kind", TransitionKind, TransitionKind.PLAIN),
+            priority=self.optional_int(info, "priority") or 0,
+            span=self.span(block),
+            command=self.command(block),
+            pending=info.attrs.get("pending"),
+            reply_to=info.attrs.get("reply-to"),
+            reply=info.attrs.get("reply"),
+        )
+
+    def read_count(self, element: _Element, what: str, minimum: int) -> int:
+        text = element.child("text")
+        if text is None:
+            raise self.error(element, f"{what} has no <text>")
+        raw = text.text.strip()
+        if not _INTEGER.fullmatch(raw):
+            raise self.error(text, f"{what} is '{raw}', not an integer")
+        value = int(raw)
+        if value < minimum:
+            if minimum == 0:
+                raise self.error(text, f"{what} is {value}: it must not be negative")
+            raise self.error(text, f"{what} is {value}: it must be at least {minimum}")
+        return value
+
+    def read_weight(self, arc: _Element) -> int:
+        ident = arc.attrs["id"]
+        arc_type = arc.attrs.get("type")
+        type_element = arc.child("type")
+        if type_element is not None:
+            text = type_element.child("text")
+            arc_type = type_element.attrs.get("value") or (text.text if text is not None else "")
+        if arc_type is not None and arc_type.strip().lower() not in ("normal", ""):
+            raise self.error(
+                arc if type_element is None else type_element,
+                f"<arc> '{ident}' is of type '{arc_type.strip()}'; coral reads only normal"
+                " arcs (no inhibitor, reset, read or other arc extensions)",
+            )
+        inscription = arc.child("inscription")
+        if inscription is None:
+            return 1
+        return self.read_count(inscription, f"weight of <arc> '{ident}'", 1)
+
+    def resolve_references(self, nodes: list[_Element]) -> dict[str, _Element]:
+        """Map every node id, reference nodes included, to the place or transition."""
+        resolved: dict[str, _Element] = {}
+        for element in nodes:
+            if element.tag in ("place", "transition"):
+                resolved[element.attrs["id"]] = element
+        for element in nodes:
+            if element.tag not in ("referencePlace", "referenceTransition"):
+                continue
+            seen = [element.attrs["id"]]
+            current = element
+            while current.tag in ("referencePlace", "referenceTransition"):
+                ref = current.attrs.get("ref")
+                if ref is None:
+                    raise self.error(current, f"{current.describe()} has no ref")
+                target = self.ids.get(ref)
+                if target is None or target.tag not in _NODE_TAGS:
+                    nodes_ids = [i for i, e in self.ids.items() if e.tag in _NODE_TAGS]
+                    raise self.error(
+                        current,
+                        f"{current.describe()} refers to unknown node '{ref}'"
+                        f"{did_you_mean(ref, nodes_ids)}",
+                    )
+                if ref in seen:
+                    chain = " -> ".join([*seen, ref])
+                    raise self.error(
+                        element, f"{element.describe()} is part of a reference cycle {chain}"
+                    )
+                seen.append(ref)
+                current = target
+            wanted = "place" if element.tag == "referencePlace" else "transition"
+            if current.tag != wanted:
+                raise self.error(
+                    element,
+                    f"{element.describe()} refers to {current.tag} '{current.attrs['id']}';"
+                    f" it must refer to a {wanted}",
+                )
+            resolved[element.attrs["id"]] = current
+        return resolved
+
+    def arc_ends(self, arc: _Element, resolved: dict[str, _Element]) -> tuple[_Element, _Element]:
+        ends = []
+        for end in ("source", "target"):
+            ref = arc.attrs.get(end)
+            if ref is None:
+                raise self.error(arc, f"<arc> '{arc.attrs['id']}' has no {end}")
+            node = resolved.get(ref)
+            if node is None:
+                raise self.error(
+                    arc,
+                    f"<arc> '{arc.attrs['id']}' has {end} '{ref}', an unknown id"
+                    f"{did_you_mean(ref, resolved)}",
+                )
+            ends.append(node)
+        return ends[0], ends[1]
+
+    # -- coral's own blocks -----------------------------------------------------------------
+
+    def coral_name(self, element: _Element) -> str:
+        """The Net name: the one `to_pnml` stored when it had to sanitise the id."""
+        block = _coral_block(element)
+        if block is not None:
+            named = block.child("name")
+            if named is not None and "value" in named.attrs:
+                return named.attrs["value"]
+        return element.attrs["id"]
+
+    def optional_int(self, element: _Element, attribute: str) -> int | None:
+        raw = element.attrs.get(attribute)
+        if raw is None:
+            return None
+        if not _INTEGER.fullmatch(raw.strip()):
+            raise self.error(
+                element, f"coral <{element.tag}> {attribute} '{raw}' is not an integer"
+            )
+        return int(raw)
+
+    def required(self, element: _Element, attribute: str) -> str:
+        raw = element.attrs.get(attribute)
+        if raw is None:
+            raise self.error(element, f"coral <{element.tag}> has no {attribute}")
+        return raw
+
+    def enum(self, element: _Element, attribute: str, kind: type[_Kind], default: _Kind) -> _Kind:
+        raw = element.attrs.get(attribute)
+        if raw is None:
+            return default
+        try:
+            return kind(raw)
+        except ValueError:
+            choices = ", ".join(k.value for k in kind)
+            raise self.error(
+                element, f"coral <{element.tag}> {attribute} '{raw}' is not one of {choices}"
+            ) from None
+
+    def span(self, block: _Element) -> Span | None:
+        element = block.child("span")
+        if element is None:
+            return None
+        numbers = []
+        for attribute in ("line", "col", "end-line", "end-col"):
+            value = self.optional_int(element, attribute)
+            if value is None:
+                raise self.error(element, f"coral <span> has no {attribute}")
+            numbers.append(value)
+        return Span(self.required(element, "file"), *numbers)
+
+    def resources(self, block: _Element) -> tuple[str, ...]:
+        return tuple(self.required(c, "name") for c in block.children if c.tag == "resource")
+
+    def tokens(self, element: _Element) -> tuple[tuple[str, int], ...]:
+        result = []
+        for child in element.children:
+            if child.tag == "tokens":
+                count = self.optional_int(child, "count")
+                result.append((self.required(child, "place"), 1 if count is None else count))
+        return tuple(result)
+
+    def command(self, block: _Element) -> Command | None:
+        element = block.child("command")
+        if element is None:
+            return None
+        params: list[tuple[str, Value]] = []
+        for child in element.children:
+            if child.tag == "param":
+                params.append((self.required(child, "name"), self.value(child)))
+        return Command(
+            system=self.required(element, "system"),
+            name=self.required(element, "name"),
+            params=tuple(params),
+            resources=self.resources(element),
+            replies=tuple(self.required(c, "kind") for c in element.children if c.tag == "reply"),
+        )
+
+    def value(self, element: _Element) -> Value:
+        raw = self.required(element, "value")
+        kind = element.attrs.get("type", "str")
+        try:
+            if kind == "int":
+                return int(raw)
+            if kind == "float":
+                return float(raw)
+            if kind == "bool":
+                return raw == "true"
+        except ValueError:
+            raise self.error(element, f"coral <param> value '{raw}' is not a {kind}") from None
+        if kind != "str":
+            raise self.error(element, f"coral <param> has unknown type '{kind}'")
+        return raw
+
+    def read_net_block(self, net: _Element) -> _NetExtras:
+        block = _coral_block(net)
+        if block is None:
+            return _NetExtras()
+        vehicle = block.child("vehicle")
+        finals = []
+        assertions = []
+        for child in block.children:
+            if child.tag == "final":
+                finals.append(FinalMarking(self.tokens(child), self.span(child)))
+            elif child.tag == "assertion":
+                assertions.append(
+                    Assertion(
+                        kind=self.enum(child, "kind", AssertKind, AssertKind.NEVER),
+                        places=self.tokens(child),
+                        bound=self.optional_int(child, "bound"),
+                        span=self.span(child),
+                    )
+                )
+        return _NetExtras(
+            vehicle=None if vehicle is None else self.required(vehicle, "name"),
+            sources=tuple(self.required(c, "path") for c in block.children if c.tag == "source"),
+            finals=tuple(finals),
+            assertions=tuple(assertions),
+        )
+
+
+_NODE_TAGS = frozenset({"place", "transition", "referencePlace", "referenceTransition"})
+_ID_ELEMENTS = _NODE_TAGS | {"arc", "page"}
+
+
+@dataclass(frozen=True)
+class _NetExtras:
+    vehicle: str | None = None
+    sources: tuple[str, ...] = ()
+    finals: tuple[FinalMarking, ...] = ()
+    assertions: tuple[Assertion, ...] = ()
+
+
+def _coral_block(element: _Element) -> _Element | None:
+    for child in element.children:
+        if child.tag == "toolspecific" and _is_coral_block(child):
+            return child
+    return None
+
+
+# ---------------------------------------------------------------------------------------
+# Writing
+# ---------------------------------------------------------------------------------------
+
+
+def write_pnml(net: Net, path: str | os.PathLike[str]) -> None:
+    """Write ``net`` as a PNML file (UTF-8); see `to_pnml`.
+
+    Raises:
+        PnmlError: A name or label holds a character XML cannot carry.
+        OSError: The file cannot be written.
+    """
+    text = to_pnml(net)
+    with open(path, "w", encoding="utf-8", newline="\n") as f:
+        f.write(text)
+
+
+def to_pnml(net: Net) -> str:
+    """The net as a standard single-page ptnet PNML document.
+
+    Names that are plain ASCII identifiers (dots and dashes allowed) are used as ids
+    unchanged; any other name, or one clashing with another element's id, gets a
+    sanitised unique id, and the real name is kept in a coral ``<toolspecific>`` block
+    so `parse_pnml` restores it. Weights of 1 and markings of 0 are left implicit, as
+    the standard allows.
+
+    Args:
+        net: Any net.
+
+    Returns:
+        The document, starting with an XML declaration.
+
+    Raises:
+        PnmlError: A name or label holds a character XML cannot carry (e.g. ``\\x00``).
+    """
+    ids = _IdAllocator()
+    place_ids = ids.assign([p.name for p in net.places])
+    transition_ids = ids.assign([t.name for t in net.transitions])
+    net_id = ids.fresh(net.name)
+    page_id = ids.fresh("page0")
+
+    out = [
+        '<?xml version="1.0" encoding="UTF-8"?>',
+        f"<pnml xmlns={quoteattr(PNML_NAMESPACE)}>",
+        f"  <net id={_attr(net_id)} type={quoteattr(PTNET_TYPE)}>",
+        f"    <name><text>{_text(net.name)}</text></name>",
+        f"    <page id={_attr(page_id)}>",
+    ]
+    for place, ident in zip(net.places, place_ids, strict=True):
+        body = _name_text(place.label)
+        if place.initial:
+            body.append(f"<initialMarking><text>{place.initial}</text></initialMarking>")
+        out += _node("place", ident, body + _place_block(place, ident))
+    for tr, ident in zip(net.transitions, transition_ids, strict=True):
+        out += _node("transition", ident, _name_text(tr.label) + _transition_block(tr, ident))
+    place_id = dict(zip((p.name for p in net.places), place_ids, strict=True))
+    for tr, ident in zip(net.transitions, transition_ids, strict=True):
+        arcs = [(place_id[p], ident, w) for p, w in tr.inputs]
+        arcs += [(ident, place_id[p], w) for p, w in tr.outputs]
+        for source, target, weight in arcs:
+            arc_id = ids.fresh(f"{source}-{target}")
+            head = f"      <arc id={_attr(arc_id)} source={_attr(source)} target={_attr(target)}"
+            if weight == 1:
+                out.append(head + "/>")
+            else:
+                out.append(head + ">")
+                out.append(f"        <inscription><text>{weight}</text></inscription>")
+                out.append("      </arc>")
+    out.append("    </page>")
+    out.extend(_indent(_net_block(net, net_id), 4))
+    out.append("  </net>")
+    out.append("</pnml>")
+    return "\n".join(out) + "\n"
+
+
+class _IdAllocator:
+    """Hands out document-unique XML ids, keeping names as ids whenever it can."""
+
+    def __init__(self) -> None:
+        self.used: set[str] = set()
+
+    def assign(self, names: list[str]) -> list[str]:
+        # First pass: safe names claim themselves, so a sanitised id never steals one.
+        result: list[str | None] = []
+        for name in names:
+            if _SAFE_ID.fullmatch(name) and name not in self.used:
+                self.used.add(name)
+                result.append(name)
+            else:
+                result.append(None)
+        return [
+            ident if ident is not None else self.fresh(name)
+            for ident, name in zip(result, names, strict=True)
+        ]
+
+    def fresh(self, wanted: str) -> str:
+        base = _UNSAFE_ID_CHAR.sub("_", wanted)
+        if not base or not _SAFE_ID.fullmatch(base):
+            base = "_" + base
+        candidate, n = base, 1
+        while candidate in self.used:
+            n += 1
+            candidate = f"{base}_{n}"
+        self.used.add(candidate)
+        return candidate
+
+
+def _check_xml(value: str) -> str:
+    bad = _NOT_XML.search(value)
+    if bad is not None:
+        raise PnmlError(
+            f"cannot write {value!r} to PNML: character {bad.group()!r} is not allowed in XML"
+        )
+    return value
+
+
+def _attr(value: str | int | float) -> str:
+    return quoteattr(_check_xml(str(value)))
+
+
+def _text(value: str) -> str:
+    # A raw carriage return would come back as a line feed; a reference keeps it.
+    return escape(_check_xml(value)).replace("\r", "&#13;")
+
+
+def _name_text(label: str) -> list[str]:
+    return [f"<name><text>{_text(label)}</text></name>"] if label else []
+
+
+def _node(tag: str, ident: str, body: list[str]) -> list[str]:
+    head = f"      <{tag} id={_attr(ident)}"
+    if not body:
+        return [head + "/>"]
+    return [head + ">", *_indent(body, 8), f"      </{tag}>"]
+
+
+def _indent(lines: list[str], width: int) -> list[str]:
+    pad = " " * width
+    return [pad + line for line in lines]
+
+
+def _element(tag: str, attrs: dict[str, str | int | float | None]) -> str:
+    rendered = "".join(f" {k}={_attr(v)}" for k, v in attrs.items() if v is not None)
+    return f"<{tag}{rendered}/>"
+
+
+def _block(lines: list[str]) -> list[str]:
+    if not lines:
+        return []
+    head = f"<toolspecific tool={quoteattr(CORAL_TOOL)} version={quoteattr(CORAL_TOOL_VERSION)}>"
+    return [head, *("  " + line for line in lines), "</toolspecific>"]
+
+
+def _name_line(name: str, ident: str) -> list[str]:
+    return [] if name == ident else [_element("name", {"value": name})]
+
+
+def _span_line(span: Span | None) -> list[str]:
+    if span is None:
+        return []
+    return [
+        _element(
+            "span",
+            {
+                "file": span.file,
+                "line": span.line,
+                "col": span.col,
+                "end-line": span.end_line,
+                "end-col": span.end_col,
+            },
+        )
+    ]
+
+
+def _resource_lines(resources: tuple[str, ...]) -> list[str]:
+    return [_element("resource", {"name": r}) for r in resources]
+
+
+def _place_block(place: Place, ident: str) -> list[str]:
+    lines = _name_line(place.name, ident)
+    mission = (
+        place.kind is not PlaceKind.MISSION
+        or place.capacity is not None
+        or place.span is not None
+        or place.resources
+        or place.pending_of is not None
+        or place.complement_of is not None
+    )
+    if mission:
+        lines.append(
+            _element(
+                "place",
+                {
+                    "kind": place.kind.value,
+                    "capacity": place.capacity,
+                    "pending-of": place.pending_of,
+                    "complement-of": place.complement_of,
+                },
+            )
+        )
+        lines += _span_line(place.span) + _resource_lines(place.resources)
+    return _block(lines)
+
+
+def _transition_block(tr: Transition, ident: str) -> list[str]:
+    lines = _name_line(tr.name, ident)
+    mission = (
+        tr.kind is not TransitionKind.PLAIN
+        or tr.priority
+        or tr.span is not None
+        or tr.command is not None
+        or tr.pending is not None
+        or tr.reply_to is not None
+        or tr.reply is not None
+    )
+    if mission:
+        lines.append(
+            _element(
+                "transition",
+                {
+                    "kind": tr.kind.value,
+                    "priority": tr.priority or None,
+                    "pending": tr.pending,
+                    "reply-to": tr.reply_to,
+                    "reply": tr.reply,
+                },
+            )
+        )
+        lines += _span_line(tr.span)
+        if tr.command is not None:
+            lines += _command_lines(tr.command)
+    return _block(lines)
+
+
+def _command_lines(command: Command) -> list[str]:
+    body = [
+        _element("param", {"name": name, "type": _value_type(value), "value": _value(value)})
+        for name, value in command.params
+    ]
+    body += _resource_lines(command.resources)
+    body += [_element("reply", {"kind": kind}) for kind in command.replies]
+    head = f"<command system={_attr(command.system)} name={_attr(command.name)}"
+    if not body:
+        return [head + "/>"]
+    return [head + ">", *("  " + line for line in body), "</command>"]
+
+
+def _value_type(value: Value) -> str:
+    if isinstance(value, bool):
+        return "bool"
+    if isinstance(value, int):
+        return "int"
+    if isinstance(value, float):
+        return "float"
+    return "str"
+
+
+def _value(value: Value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)  # repr round-trips every float exactly
+    return str(value)
+
+
+def _token_lines(tokens: tuple[tuple[str, int], ...]) -> list[str]:
+    return [_element("tokens", {"place": p, "count": n}) for p, n in tokens]
+
+
+def _net_block(net: Net, ident: str) -> list[str]:
+    lines = _name_line(net.name, ident)
+    if net.vehicle is not None:
+        lines.append(_element("vehicle", {"name": net.vehicle}))
+    lines += [_element("source", {"path": s}) for s in net.sources]
+    for final in net.finals:
+        body = _span_line(final.span) + _token_lines(final.tokens)
+        lines += ["<final>", *("  " + line for line in body), "</final>"]
+    for assertion in net.assertions:
+        head = _element("assertion", {"kind": assertion.kind.value, "bound": assertion.bound})
+        body = _span_line(assertion.span) + _token_lines(assertion.places)
+        lines += [head[:-2] + ">", *("  " + line for line in body), "</assertion>"]
+    return _block(lines)
