@@ -7,6 +7,7 @@ Target (issue 2): parse + compile under 1 s on the 2-core reference machine.
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -44,15 +45,16 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     text = generate_mission(args.transitions)
     compile_source("mission w\nvehicle ROMEO\n", "warm.coral")  # load the profile once
-    parse_times, compile_times = [], []
+    parse_times, compile_times, compile_cpu = [], [], []
     net = None
     for _ in range(args.repeat):
         start = time.perf_counter()
         parse(text, "generated.coral")
         parse_times.append(time.perf_counter() - start)
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         result = compile_source(text, "generated.coral")
         compile_times.append(time.perf_counter() - start)
+        compile_cpu.append(time.process_time() - cpu)
         net = result.raise_for_errors()
     assert net is not None
     parse_s = statistics.median(parse_times)
@@ -67,9 +69,12 @@ def main(argv: list[str] | None = None) -> int:
         f"parse + compile:   median {total_s * 1000:8.1f} ms over {args.repeat} runs "
         f"(min {min(compile_times) * 1000:.1f}, max {max(compile_times) * 1000:.1f})"
     )
+    cpu_s = statistics.median(compile_cpu)
+    print(f"parse + compile:   median {cpu_s * 1000:8.1f} ms CPU time (what an idle core gives)")
     print(
-        f"target 1000 ms:    {'met' if total_s < 1.0 else 'NOT met'} "
-        f"({total_s / 1.0:.2f} of the budget)"
+        f"target 1000 ms:    {'met' if total_s < 1.0 else 'NOT met'} on wall time "
+        f"({total_s:.2f} of the budget); load average now {os.getloadavg()[0]:.1f} "
+        f"on {os.cpu_count()} cores"
     )
     return 0
 

@@ -30,6 +30,7 @@ from coral_lang.diagnostics import (
     did_you_mean,
     sort_diagnostics,
 )
+from coral_lang.gcpause import cyclic_gc_paused
 from coral_lang.net import (
     Assertion,
     AssertKind,
@@ -84,9 +85,10 @@ def compile_file(path: str | Path, profiles: Sequence[VehicleProfile] = ()) -> C
         profiles: vehicle profiles to use before the bundled ones (matched by vehicle name).
     """
     path = Path(path)
-    compiler = _Compiler(profiles)
-    compiler.load_root(path)
-    return compiler.finish()
+    with cyclic_gc_paused():
+        compiler = _Compiler(profiles)
+        compiler.load_root(path)
+        return compiler.finish()
 
 
 def compile_source(
@@ -96,9 +98,10 @@ def compile_source(
     base_dir: str | Path | None = None,
 ) -> CompileResult:
     """Compile mission ``text``; includes resolve against ``base_dir`` (default: cwd)."""
-    compiler = _Compiler(profiles)
-    compiler.load_text(text, file, Path(base_dir) if base_dir is not None else Path.cwd())
-    return compiler.finish()
+    with cyclic_gc_paused():
+        compiler = _Compiler(profiles)
+        compiler.load_text(text, file, Path(base_dir) if base_dir is not None else Path.cwd())
+        return compiler.finish()
 
 
 def compile_mission(path: str | Path, profiles: Sequence[VehicleProfile] = ()) -> Net:
@@ -584,7 +587,7 @@ class _Compiler:
         given: dict[str, ast.Arg] = {}
         ok = True
         seen_named = False
-        signature = f"{spec.name}({', '.join(p.describe() for p in spec.params)})"
+        signature = _Signature(spec)
         for index, arg in enumerate(action.args):
             if arg.name is None:
                 if seen_named:
@@ -853,3 +856,13 @@ def _display_path(path: Path) -> str:
         return str(path.relative_to(Path.cwd()))
     except ValueError:
         return str(path)
+
+
+class _Signature:
+    """A command's signature for notes, built only if an error note needs it."""
+
+    def __init__(self, spec: CommandSpec) -> None:
+        self.spec = spec
+
+    def __str__(self) -> str:
+        return f"{self.spec.name}({', '.join(p.describe() for p in self.spec.params)})"

@@ -11,7 +11,6 @@ part of compiling it.
 
 from __future__ import annotations
 
-import bisect
 import enum
 import re
 from typing import NamedTuple
@@ -70,7 +69,7 @@ _PUNCTUATION = {
 }
 
 # White space and comments are skipped as part of each match, so the Python loop runs
-# once per token; lines are found afterwards by bisecting the newline offsets.
+# once per token.
 _SCANNER = re.compile(
     r"""
     (?:[ \t\r\n\f\v]+|\#[^\n]*)*
@@ -87,7 +86,6 @@ _SCANNER = re.compile(
 )
 
 _ESCAPE = re.compile(r"\\(.)")
-_NEWLINE = re.compile("\n")
 _ESCAPES = {'"': '"', "\\": "\\", "n": "\n", "t": "\t"}
 
 
@@ -121,43 +119,48 @@ def tokenize(text: str, file: str) -> tuple[list[Token], list[Diagnostic]]:
     tokens: list[Token] = []
     diagnostics: list[Diagnostic] = []
     append = tokens.append
-    newlines = [m.start() for m in _NEWLINE.finditer(text)]
-    for match in _SCANNER.finditer(text):
-        group = match.lastgroup
-        assert group is not None
-        start, end = match.span(group)
-        line = bisect.bisect_left(newlines, start) + 1
-        col = start - (newlines[line - 2] + 1 if line > 1 else 0) + 1
-        if group == "ident":
-            append(Token(Kind.IDENT, match.group(group), file, line, col, line, col + end - start))
-            continue
-        if group == "punct":
+    line = 0
+    # Line by line: strings and comments never span lines, so columns come straight
+    # from match offsets.
+    for line, text_line in enumerate(text.split("\n"), start=1):
+        for match in _SCANNER.finditer(text_line):
+            group = match.lastgroup
+            if group == "end":
+                break
+            start, end = match.span(group)
+            col = start + 1
+            if group == "ident":
+                append(Token(Kind.IDENT, match.group(group), file, line, col, line, end + 1))
+                continue
+            if group == "punct":
+                lexeme = match.group(group)
+                append(Token(_PUNCTUATION[lexeme], lexeme, file, line, col, line, end + 1))
+                continue
             lexeme = match.group(group)
-            append(Token(_PUNCTUATION[lexeme], lexeme, file, line, col, line, col + end - start))
-            continue
-        if group == "end":
-            append(Token(Kind.EOF, "", file, line, col, line, col + 1))
-            break
-        lexeme = match.group(group)
-        span = Span(file, line, col, line, col + end - start)
-        if group == "number":
-            kind = Kind.INT if lexeme.isdigit() else Kind.FLOAT
-            append(Token(kind, lexeme, *span))
-        elif group == "string":
-            closed = len(lexeme) >= 2 and lexeme.endswith('"') and not _escaped_quote_at_end(lexeme)
-            body = lexeme[1:-1] if closed else lexeme[1:]
-            value = _ESCAPE.sub(lambda m: _ESCAPES.get(m.group(1), m.group(0)), body)
-            if not closed:
-                diagnostics.append(
-                    Diagnostic(Severity.ERROR, "CORAL001", "unterminated string", span)
+            span = Span(file, line, col, line, end + 1)
+            if group == "number":
+                kind = Kind.INT if lexeme.isdigit() else Kind.FLOAT
+                append(Token(kind, lexeme, *span))
+            elif group == "string":
+                closed = (
+                    len(lexeme) >= 2 and lexeme.endswith('"') and not _escaped_quote_at_end(lexeme)
                 )
-            append(Token(Kind.STRING, value, *span))
-        else:
-            shown = lexeme if lexeme.isprintable() else repr(lexeme)
-            diagnostics.append(
-                Diagnostic(Severity.ERROR, "CORAL001", f"unexpected character '{shown}'", span)
-            )
-            append(Token(Kind.ERROR, lexeme, *span))
+                body = lexeme[1:-1] if closed else lexeme[1:]
+                value = _ESCAPE.sub(lambda m: _ESCAPES.get(m.group(1), m.group(0)), body)
+                if not closed:
+                    diagnostics.append(
+                        Diagnostic(Severity.ERROR, "CORAL001", "unterminated string", span)
+                    )
+                append(Token(Kind.STRING, value, *span))
+            else:
+                shown = lexeme if lexeme.isprintable() else repr(lexeme)
+                diagnostics.append(
+                    Diagnostic(Severity.ERROR, "CORAL001", f"unexpected character '{shown}'", span)
+                )
+                append(Token(Kind.ERROR, lexeme, *span))
+    last = text.rsplit("\n", 1)[-1]
+    col = len(last) + 1
+    append(Token(Kind.EOF, "", file, max(line, 1), col, max(line, 1), col + 1))
     return tokens, diagnostics
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from coral_lang import ast, units
 from coral_lang.diagnostics import Diagnostic, Severity, Span, did_you_mean
+from coral_lang.gcpause import cyclic_gc_paused
 from coral_lang.lexer import KEYWORDS, STATEMENT_KEYWORDS, Kind, Token, tokenize
 
 
@@ -17,9 +18,10 @@ class _SyntaxError(Exception):
 
 def parse(text: str, file: str = "<mission>") -> tuple[ast.Mission, list[Diagnostic]]:
     """Parse mission ``text``; returns the tree (possibly partial) and all diagnostics."""
-    tokens, diagnostics = tokenize(text, file)
-    parser = _Parser(tokens, file, diagnostics)
-    return parser.mission(), parser.diagnostics
+    with cyclic_gc_paused():
+        tokens, diagnostics = tokenize(text, file)
+        parser = _Parser(tokens, file, diagnostics)
+        return parser.mission(), parser.diagnostics
 
 
 def _join(a: Span | Token, b: Span | Token) -> Span:
