@@ -125,7 +125,7 @@ def tokenize(text: str, file: str) -> tuple[list[Token], list[Diagnostic]]:
     for line, text_line in enumerate(text.split("\n"), start=1):
         for match in _SCANNER.finditer(text_line):
             group = match.lastgroup
-            if group == "end":
+            if group is None or group == "end":
                 break
             start, end = match.span(group)
             col = start + 1
