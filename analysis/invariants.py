@@ -1,0 +1,401 @@
+"""Minimal P- and T-invariants (semiflows) with exact integer arithmetic.
+
+A P-invariant is y >= 0, y != 0, with y^T C = 0: the weighted token sum y·M is the
+same in every reachable marking. A T-invariant is x >= 0, x != 0, with C x = 0: firing
+every transition t exactly x(t) times (in some firable order, if there is one) returns
+to the starting marking.
+
+The algorithm is the Farkas / Fourier-Motzkin elimination of Martinez and Silva (1982):
+start from the identity, cancel one column of the matrix at a time by positive
+combinations of rows of opposite sign, drop rows whose support contains another row's,
+and divide every row by the gcd of its entries. What remains are the minimal-support
+invariants, each the smallest integer vector on its support. Rows are Python ints, so
+nothing overflows. The number of rows can explode exponentially; ``max_rows`` and
+``time_limit`` bound the work, and the result then says ``complete=False`` and keeps
+only rows that are already invariants (each still a genuine invariant).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+from analysis.structural import classify, incidence
+from coral_lang.net import Net
+
+Clock = Callable[[], float]
+
+DEFAULT_MAX_ROWS = 20_000
+DEFAULT_TIME_LIMIT = 20.0
+
+# A working row: (weights over the variables, residual over the columns, support bitmask).
+_Row = tuple[list[int], list[int], int]
+
+
+@dataclass(frozen=True)
+class Invariant:
+    """One minimal-support invariant.
+
+    Attributes:
+        weights: One non-negative weight per place (P) or transition (T), in net order.
+        names: The place or transition names, aligned with ``weights``.
+    """
+
+    weights: tuple[int, ...]
+    names: tuple[str, ...]
+
+    @property
+    def support(self) -> frozenset[int]:
+        """Indices with a non-zero weight."""
+        return frozenset(i for i, w in enumerate(self.weights) if w)
+
+    def support_names(self) -> tuple[str, ...]:
+        """Names of the elements with a non-zero weight, in net order."""
+        return tuple(n for n, w in zip(self.names, self.weights, strict=True) if w)
+
+    def value(self, vector: Sequence[int]) -> int:
+        """The weighted sum ``weights · vector`` (y·M for a P-invariant)."""
+        return sum(w * v for w, v in zip(self.weights, vector, strict=True))
+
+    def describe(self) -> str:
+        """The invariant as a sum, e.g. ``idle + 2*busy``."""
+        terms = [
+            n if w == 1 else f"{w}*{n}" for n, w in zip(self.names, self.weights, strict=True) if w
+        ]
+        return " + ".join(terms)
+
+
+@dataclass(frozen=True)
+class InvariantBasis:
+    """The minimal-support invariants of one kind, and whether the search finished.
+
+    Attributes:
+        kind: ``"P"`` (place weights, y^T C = 0) or ``"T"`` (firing counts, C x = 0).
+        names: The places (P) or transitions (T) the weights refer to.
+        invariants: Minimal-support invariants found, in a deterministic order.
+        complete: True when the elimination finished: every minimal-support invariant is
+            listed. False when a limit stopped it: the listed ones are genuine invariants
+            but others may exist.
+        reason: Why the search stopped early, empty when complete.
+    """
+
+    kind: Literal["P", "T"]
+    names: tuple[str, ...]
+    invariants: tuple[Invariant, ...]
+    complete: bool
+    reason: str = ""
+    method: str = "Farkas algorithm (exact integers, minimal supports)"
+
+    def covered_elements(self) -> frozenset[int]:
+        """Indices in the support of some listed invariant."""
+        covered: set[int] = set()
+        for inv in self.invariants:
+            covered |= inv.support
+        return frozenset(covered)
+
+    def uncovered(self) -> tuple[str, ...]:
+        """Names not in the support of any listed invariant."""
+        covered = self.covered_elements()
+        return tuple(n for i, n in enumerate(self.names) if i not in covered)
+
+    def covered(self) -> bool | None:
+        """Whether every element is in some invariant's support; None if the search
+        stopped early and the listed invariants do not cover everything."""
+        if not self.uncovered():
+            return True
+        return False if self.complete else None
+
+    def explain(self) -> str:
+        """One line: how many invariants, whether the search finished."""
+        what = "P-invariants" if self.kind == "P" else "T-invariants"
+        head = f"{len(self.invariants)} minimal {what}"
+        if not self.complete:
+            head += f" (incomplete: {self.reason})"
+        return head
+
+
+def semiflows(
+    rows: Sequence[Sequence[int]],
+    max_rows: int = DEFAULT_MAX_ROWS,
+    time_limit: float | None = DEFAULT_TIME_LIMIT,
+    clock: Clock = time.monotonic,
+) -> tuple[list[tuple[int, ...]], bool, str]:
+    """Minimal-support non-negative integer vectors v with ``sum_i v[i] * rows[i] = 0``.
+
+    Args:
+        rows: One row per variable (a place for P-invariants: the rows of C).
+        max_rows: Stop when the working set exceeds this many rows.
+        time_limit: Stop after this many seconds (measured with ``clock``); None for no
+            limit.
+        clock: Monotonic seconds; injected so tests can be deterministic.
+
+    Returns:
+        ``(vectors, complete, reason)``: the vectors are sorted; when ``complete`` is
+        False they are only the rows that were already semiflows when the limit hit.
+    """
+    n = len(rows)
+    m = len(rows[0]) if rows else 0
+    deadline = None if time_limit is None else clock() + time_limit
+    work: list[_Row] = [
+        ([1 if j == i else 0 for j in range(n)], [int(v) for v in rows[i]], 1 << i)
+        for i in range(n)
+    ]
+    pending = [c for c in range(m) if any(r[1][c] for r in work)]
+    complete, reason = True, ""
+    try:
+        while pending:
+            column = min(pending, key=lambda c: _growth(work, c))
+            pending.remove(column)
+            work = _eliminate(work, column, max_rows, deadline, clock)
+    except _Stop as stop:
+        complete, reason = False, stop.reason
+        if stop.reason.startswith("time"):
+            reason = f"time limit of {time_limit} s"
+    done = [r for r in work if not any(r[1])]
+    vectors = sorted({tuple(r[0]) for r in done})
+    return vectors, complete, reason
+
+
+class _Stop(Exception):
+    """A work limit was hit; the working set before this step is still valid."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+def _check(deadline: float | None, clock: Clock) -> None:
+    if deadline is not None and clock() > deadline:
+        raise _Stop("time")
+
+
+def _eliminate(
+    work: list[_Row], column: int, max_rows: int, deadline: float | None, clock: Clock
+) -> list[_Row]:
+    """One Fourier-Motzkin step: cancel ``column`` with positive combinations."""
+    zero = [r for r in work if r[1][column] == 0]
+    positive = [r for r in work if r[1][column] > 0]
+    negative = [r for r in work if r[1][column] < 0]
+    if len(zero) + len(positive) * len(negative) > 8 * max_rows:
+        raise _Stop(f"more than {max_rows} intermediate rows")
+    combined = list(zero)
+    for a in positive:
+        _check(deadline, clock)
+        for b in negative:
+            fa, fb = -b[1][column], a[1][column]
+            weights = [fa * x + fb * y for x, y in zip(a[0], b[0], strict=True)]
+            residual = [fa * x + fb * y for x, y in zip(a[1], b[1], strict=True)]
+            combined.append(_normalised(weights, residual, a[2] | b[2]))
+    result = _minimal_supports(combined, deadline, clock)
+    if len(result) > max_rows:
+        raise _Stop(f"more than {max_rows} intermediate rows")
+    return result
+
+
+def _growth(work: list[_Row], column: int) -> int:
+    """Rows added minus rows removed if ``column`` is eliminated next (a heuristic)."""
+    pos = sum(1 for r in work if r[1][column] > 0)
+    neg = sum(1 for r in work if r[1][column] < 0)
+    return pos * neg - pos - neg
+
+
+def _normalised(weights: list[int], residual: list[int], support: int) -> _Row:
+    g = 0
+    for v in (*weights, *residual):
+        if v:
+            g = math.gcd(g, v)
+    if g > 1:
+        weights = [v // g for v in weights]
+        residual = [v // g for v in residual]
+    return weights, residual, support
+
+
+def _minimal_supports(rows: list[_Row], deadline: float | None, clock: Clock) -> list[_Row]:
+    """Keep rows whose support contains no other kept row's support.
+
+    Two rows with equal support are proportional once all are minimal (the residual
+    is linear in the weights), so keeping the first one loses nothing.
+    """
+    ordered = sorted(rows, key=lambda r: (r[2].bit_count(), r[0]))
+    kept: list[_Row] = []
+    masks: list[int] = []
+    for count, row in enumerate(ordered):
+        if count % 512 == 0:
+            _check(deadline, clock)
+        mask = row[2]
+        if any(k & ~mask == 0 for k in masks):
+            continue
+        kept.append(row)
+        masks.append(mask)
+    return kept
+
+
+def p_invariants(
+    net: Net,
+    max_rows: int = DEFAULT_MAX_ROWS,
+    time_limit: float | None = DEFAULT_TIME_LIMIT,
+    clock: Clock = time.monotonic,
+) -> InvariantBasis:
+    """Minimal-support P-invariants of ``net`` (y >= 0, y^T C = 0).
+
+    Args:
+        net: The net.
+        max_rows: Work bound, see `semiflows`.
+        time_limit: Seconds, see `semiflows`.
+        clock: Monotonic clock for the time limit.
+
+    Returns:
+        An `InvariantBasis` of kind ``"P"``.
+    """
+    vectors, complete, reason = semiflows(incidence(net).rows(), max_rows, time_limit, clock)
+    names = net.place_names
+    return InvariantBasis(
+        kind="P",
+        names=names,
+        invariants=tuple(Invariant(v, names) for v in vectors),
+        complete=complete,
+        reason=reason,
+    )
+
+
+def t_invariants(
+    net: Net,
+    max_rows: int = DEFAULT_MAX_ROWS,
+    time_limit: float | None = DEFAULT_TIME_LIMIT,
+    clock: Clock = time.monotonic,
+) -> InvariantBasis:
+    """Minimal-support T-invariants of ``net`` (x >= 0, C x = 0).
+
+    Args:
+        net: The net.
+        max_rows: Work bound, see `semiflows`.
+        time_limit: Seconds, see `semiflows`.
+        clock: Monotonic clock for the time limit.
+
+    Returns:
+        An `InvariantBasis` of kind ``"T"``.
+    """
+    matrix = incidence(net).rows()
+    columns = [[row[t] for row in matrix] for t in range(len(net.transitions))]
+    vectors, complete, reason = semiflows(columns, max_rows, time_limit, clock)
+    names = tuple(t.name for t in net.transitions)
+    return InvariantBasis(
+        kind="T",
+        names=names,
+        invariants=tuple(Invariant(v, names) for v in vectors),
+        complete=complete,
+        reason=reason,
+    )
+
+
+def invariant_bounds(net: Net, basis: InvariantBasis) -> dict[str, int]:
+    """Upper bounds on places from P-invariants: ``M(p) <= floor(y·M0 / y(p))``.
+
+    Sound for every reachable marking because y·M = y·M0 and all terms are
+    non-negative. Only places in the support of some invariant get a bound.
+
+    Args:
+        net: The net the invariants belong to.
+        basis: Its P-invariants (complete or not; each one is genuine).
+
+    Returns:
+        Place name -> the smallest bound any listed invariant gives.
+    """
+    if basis.kind != "P":
+        raise ValueError("place bounds need P-invariants")
+    m0 = net.initial_marking()
+    bounds: dict[str, int] = {}
+    for inv in basis.invariants:
+        total = inv.value(m0)
+        for i in inv.support:
+            bound = total // inv.weights[i]
+            name = net.places[i].name
+            bounds[name] = min(bound, bounds.get(name, bound))
+    return {name: bounds[name] for name in net.place_names if name in bounds}
+
+
+@dataclass(frozen=True)
+class InvariantReport:
+    """What the invariants prove about a net.
+
+    Attributes:
+        p: The P-invariants.
+        t: The T-invariants.
+        conservative: The all-ones vector is a P-invariant (token count constant).
+        covered_by_p: Every place is in some P-invariant: the net is structurally
+            bounded (bounded for every initial marking). None if undecided.
+        consistent: Every transition is in some T-invariant (a firing-count vector
+            using every transition returns to the start). None if undecided. A
+            bounded live net must be consistent (and covered by P-invariants).
+        bounds: Place -> bound from P-invariants for this initial marking.
+    """
+
+    p: InvariantBasis
+    t: InvariantBasis
+    conservative: bool
+    covered_by_p: bool | None
+    consistent: bool | None
+    bounds: dict[str, int]
+    method: str = "P/T-invariants (Farkas algorithm)"
+
+    def explain(self) -> str:
+        """One line summary for reports."""
+
+        def word(flag: bool | None, yes: str, no: str) -> str:
+            return yes if flag else (no if flag is False else f"{yes}: undecided")
+
+        parts = [
+            self.p.explain(),
+            self.t.explain(),
+            word(self.covered_by_p, "covered by P-invariants", "not covered by P-invariants"),
+            word(self.consistent, "consistent", "not consistent"),
+        ]
+        if self.conservative:
+            parts.append("conservative")
+        return "; ".join(parts)
+
+
+def invariant_report(
+    net: Net,
+    max_rows: int = DEFAULT_MAX_ROWS,
+    time_limit: float | None = DEFAULT_TIME_LIMIT,
+    clock: Clock = time.monotonic,
+) -> InvariantReport:
+    """Compute P- and T-invariants and what they prove (coverage, bounds, classes).
+
+    Args:
+        net: The net.
+        max_rows: Work bound for each elimination.
+        time_limit: Seconds for each elimination.
+        clock: Monotonic clock for the time limits.
+
+    Returns:
+        The `InvariantReport`.
+    """
+    p = p_invariants(net, max_rows, time_limit, clock)
+    t = t_invariants(net, max_rows, time_limit, clock)
+    return InvariantReport(
+        p=p,
+        t=t,
+        conservative=classify(net).conservative,
+        covered_by_p=p.covered(),
+        consistent=t.covered(),
+        bounds=invariant_bounds(net, p),
+    )
+
+
+__all__ = [
+    "DEFAULT_MAX_ROWS",
+    "DEFAULT_TIME_LIMIT",
+    "Invariant",
+    "InvariantBasis",
+    "InvariantReport",
+    "invariant_bounds",
+    "invariant_report",
+    "p_invariants",
+    "semiflows",
+    "t_invariants",
+]

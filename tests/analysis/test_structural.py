@@ -1,0 +1,255 @@
+"""Incidence matrices, net classes and LP boundedness: hand nets, random nets, MCC."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from hypothesis import given, settings
+
+from analysis.coverability import coverability
+from analysis.structural import classify, incidence, structural_boundedness
+from coral_lang.net import Net, Place, Transition
+from tests.analysis.reference import explore_reference
+from tests.analysis.strategies import small_nets
+from tests.conftest import CONFORMANCE
+
+Arcs = dict[str, int]
+
+
+def _net(name: str, places: dict[str, int], transitions: dict[str, tuple[Arcs, Arcs]]) -> Net:
+    return Net(
+        name,
+        tuple(Place(p, m) for p, m in places.items()),
+        tuple(
+            Transition(t, tuple(ins.items()), tuple(outs.items()))
+            for t, (ins, outs) in transitions.items()
+        ),
+    )
+
+
+def mutex() -> Net:
+    """Two processes, one lock."""
+    return _net(
+        "mutex",
+        {"idle1": 1, "cs1": 0, "idle2": 1, "cs2": 0, "lock": 1},
+        {
+            "enter1": ({"idle1": 1, "lock": 1}, {"cs1": 1}),
+            "exit1": ({"cs1": 1}, {"idle1": 1, "lock": 1}),
+            "enter2": ({"idle2": 1, "lock": 1}, {"cs2": 1}),
+            "exit2": ({"cs2": 1}, {"idle2": 1, "lock": 1}),
+        },
+    )
+
+
+def cycle(n: int) -> Net:
+    return _net(
+        "cycle",
+        {f"p{i}": 1 if i == 0 else 0 for i in range(n)},
+        {f"t{i}": ({f"p{i}": 1}, {f"p{(i + 1) % n}": 1}) for i in range(n)},
+    )
+
+
+def pump() -> Net:
+    return _net("pump", {"a": 1, "b": 0}, {"t": ({"a": 1}, {"a": 1, "b": 1})})
+
+
+def test_incidence_is_post_minus_pre_with_weights() -> None:
+    net = _net("w", {"a": 2, "b": 0}, {"t": ({"a": 2}, {"b": 3}), "u": ({"b": 1}, {"a": 1})})
+    inc = incidence(net)
+    assert inc.places == ("a", "b") and inc.transitions == ("t", "u")
+    assert inc.pre.dtype == np.int64 and inc.post.dtype == np.int64
+    assert inc.pre.tolist() == [[2, 0], [0, 1]]
+    assert inc.post.tolist() == [[0, 1], [3, 0]]
+    assert inc.matrix.tolist() == [[-2, 1], [3, -1]]
+    # Firing adds the transition's column.
+    m = net.fire(net.initial_marking(), net.transitions[0])
+    assert list(m) == (np.array(net.initial_marking()) + inc.matrix[:, 0]).tolist()
+
+
+def test_a_self_loop_cancels_in_the_incidence_but_not_in_pre_and_post() -> None:
+    inc = incidence(pump())
+    assert inc.pre[0, 0] == 1 and inc.post[0, 0] == 1 and inc.matrix[0, 0] == 0
+
+
+def test_cycle_is_state_machine_and_marked_graph() -> None:
+    kind = classify(cycle(3))
+    assert kind.state_machine and kind.marked_graph and kind.free_choice
+    assert kind.extended_free_choice and kind.conservative and kind.ordinary
+    assert "STATE_MACHINE" in kind.names() and "MARKED_GRAPH" in kind.names()
+
+
+def test_mutex_is_not_free_choice() -> None:
+    kind = classify(mutex())
+    # lock feeds enter1 and enter2, whose presets differ: not even extended free choice.
+    assert not kind.free_choice and not kind.extended_free_choice
+    assert not kind.state_machine and not kind.marked_graph
+    assert not kind.conservative and kind.ordinary
+
+
+def test_extended_free_choice_but_not_free_choice() -> None:
+    net = _net(
+        "efc",
+        {"a": 1, "b": 1, "c": 0, "d": 0},
+        {"t": ({"a": 1, "b": 1}, {"c": 1}), "u": ({"a": 1, "b": 1}, {"d": 1})},
+    )
+    kind = classify(net)
+    assert kind.extended_free_choice and not kind.free_choice
+
+
+def test_weighted_net_is_in_no_graph_class_but_can_be_conservative() -> None:
+    net = _net("w", {"a": 2, "b": 0}, {"t": ({"a": 2}, {"b": 2}), "u": ({"b": 2}, {"a": 2})})
+    kind = classify(net)
+    assert not kind.ordinary and not kind.state_machine and not kind.marked_graph
+    assert kind.conservative and kind.subconservative
+
+
+def test_mutex_is_structurally_bounded_with_tight_bounds() -> None:
+    result = structural_boundedness(mutex())
+    assert result.structurally_bounded is True and result.weights is not None
+    assert all(w >= 1 for w in result.weights.values())
+    assert result.bounds == {"idle1": 1, "cs1": 1, "idle2": 1, "cs2": 1, "lock": 1}
+    assert result.unproven == ()
+    assert "structurally bounded" in result.explain()
+
+
+def test_pump_is_not_structurally_bounded_but_its_generator_is() -> None:
+    result = structural_boundedness(pump())
+    assert result.structurally_bounded is False
+    assert result.bounds == {"a": 1} and result.unproven == ("b",)
+
+
+def _max_per_place(net: Net, states: list[tuple[int, ...]]) -> dict[str, int]:
+    return {p.name: max(m[i] for m in states) for i, p in enumerate(net.places)}
+
+
+@settings(max_examples=150)
+@given(small_nets())
+def test_lp_bounds_are_sound_and_structural_boundedness_implies_bounded(net: Net) -> None:
+    result = structural_boundedness(net, timeout_ms=5_000)
+    if result.structurally_bounded:
+        km = coverability(net, max_nodes=50_000, time_limit=20)
+        assert km.bounded is not False
+    reference = explore_reference(net, max_states=5_000)
+    seen = _max_per_place(net, reference.states)
+    for name, bound in result.bounds.items():
+        assert seen[name] <= bound, (name, bound, seen)
+
+
+# -- conformance: classification against the MCC family verdicts -------------------------
+
+_FLAGS = {
+    "ORDINARY": "ordinary",
+    "STATE_MACHINE": "state_machine",
+    "MARKED_GRAPH": "marked_graph",
+    "SIMPLE_FREE_CHOICE": "free_choice",
+    "EXTENDED_FREE_CHOICE": "extended_free_choice",
+    "CONSERVATIVE": "conservative",
+    "SUBCONSERVATIVE": "subconservative",
+}
+
+
+def _oracle_models() -> list[dict[str, Any]]:
+    path = CONFORMANCE / "oracle.yaml"
+    if not path.exists():
+        return []
+    models: list[dict[str, Any]] = yaml.safe_load(path.read_text())["models"]
+    return models
+
+
+def _read(model: dict[str, Any]) -> Net:
+    pnml = pytest.importorskip("coral_lang.pnml")
+    net: Net = pnml.read_pnml(Path(CONFORMANCE) / model["pnml"])
+    return net
+
+
+@pytest.mark.parametrize(
+    "model",
+    [m for m in _oracle_models() if m.get("mcc_family_structural_properties")],
+    ids=lambda m: str(m["model"]),
+)
+def test_classification_matches_mcc_structural_properties(model: dict[str, Any]) -> None:
+    kind = classify(_read(model))
+    expected = model["mcc_family_structural_properties"]
+    for key, attribute in _FLAGS.items():
+        if key in expected:
+            assert getattr(kind, attribute) == expected[key], key
+
+
+def test_per_place_time_limit_keeps_the_global_bounds() -> None:
+    ticks = iter(range(1_000))
+    result = structural_boundedness(mutex(), time_limit=0.5, clock=lambda: float(next(ticks)))
+    assert result.structurally_bounded is True and "time limit" in result.reason
+    # The global weighting still bounds every place, just less tightly.
+    assert set(result.bounds) == set(mutex().place_names)
+
+
+def test_public_surface_of_the_structural_modules() -> None:
+    """Pin what the verify layer may import; a change here is an API change."""
+    import importlib
+
+    expected = {
+        "analysis.structural": {
+            "DEFAULT_TIMEOUT_MS",
+            "Incidence",
+            "NetClass",
+            "StructuralBoundedness",
+            "classify",
+            "incidence",
+            "structural_boundedness",
+        },
+        "analysis.invariants": {
+            "DEFAULT_MAX_ROWS",
+            "DEFAULT_TIME_LIMIT",
+            "Invariant",
+            "InvariantBasis",
+            "InvariantReport",
+            "invariant_bounds",
+            "invariant_report",
+            "p_invariants",
+            "semiflows",
+            "t_invariants",
+        },
+        "analysis.siphons": {
+            "SiphonEnumeration",
+            "SiphonTrapCheck",
+            "is_siphon",
+            "is_trap",
+            "maximal_siphon",
+            "maximal_trap",
+            "minimal_siphons",
+            "siphon_trap_check",
+        },
+        "analysis.stateeq": {
+            "METHOD",
+            "METHOD_TRAPS",
+            "BadMarkings",
+            "Candidate",
+            "Op",
+            "PlaceConstraint",
+            "Proven",
+            "StateEquationResult",
+            "Unknown",
+            "above_bound",
+            "check_unreachable",
+            "deadlocks",
+            "never_together",
+            "realise",
+            "unexpected_deadlocks",
+        },
+        "analysis.coverability": {
+            "DEFAULT_MAX_NODES",
+            "DEFAULT_TIME_LIMIT",
+            "CoverabilityResult",
+            "PumpingTrace",
+            "coverability",
+            "replay_pump",
+        },
+    }
+    for name, names in expected.items():
+        module = importlib.import_module(name)
+        assert set(module.__all__) == names, name
+        assert all(hasattr(module, n) for n in names), name
