@@ -85,6 +85,9 @@ _SCANNER = re.compile(
     re.VERBOSE,
 )
 
+_GROUPS = _SCANNER.groupindex
+_IDENT, _NUMBER, _STRING = _GROUPS["ident"], _GROUPS["number"], _GROUPS["string"]
+_PUNCT, _END = _GROUPS["punct"], _GROUPS["end"]
 _ESCAPE = re.compile(r"\\(.)")
 _ESCAPES = {'"': '"', "\\": "\\", "n": "\n", "t": "\t"}
 
@@ -119,29 +122,36 @@ def tokenize(text: str, file: str) -> tuple[list[Token], list[Diagnostic]]:
     tokens: list[Token] = []
     diagnostics: list[Diagnostic] = []
     append = tokens.append
+    # Hot loop: names bound locally and tokens built with tuple.__new__ (a named
+    # tuple's own constructor is a Python function: twice the cost per token).
+    new, token_cls, ident, punctuation = tuple.__new__, Token, Kind.IDENT, _PUNCTUATION
+    finditer = _SCANNER.finditer
     line = 0
     # Line by line: strings and comments never span lines, so columns come straight
     # from match offsets.
     for line, text_line in enumerate(text.split("\n"), start=1):
-        for match in _SCANNER.finditer(text_line):
-            group = match.lastgroup
-            if group is None or group == "end":
+        for match in finditer(text_line):
+            index = match.lastindex
+            if index == _IDENT:
+                lexeme = match.group(index)
+                col = match.start(index) + 1
+                append(new(token_cls, (ident, lexeme, file, line, col, line, col + len(lexeme))))
+                continue
+            if index == _PUNCT:
+                lexeme = match.group(index)
+                col = match.start(index) + 1
+                kind = punctuation[lexeme]
+                append(new(token_cls, (kind, lexeme, file, line, col, line, col + len(lexeme))))
+                continue
+            if index is None or index == _END:
                 break
-            start, end = match.span(group)
-            col = start + 1
-            if group == "ident":
-                append(Token(Kind.IDENT, match.group(group), file, line, col, line, end + 1))
-                continue
-            if group == "punct":
-                lexeme = match.group(group)
-                append(Token(_PUNCTUATION[lexeme], lexeme, file, line, col, line, end + 1))
-                continue
-            lexeme = match.group(group)
-            span = Span(file, line, col, line, end + 1)
-            if group == "number":
+            lexeme = match.group(index)
+            col = match.start(index) + 1
+            span = Span(file, line, col, line, col + len(lexeme))
+            if index == _NUMBER:
                 kind = Kind.INT if lexeme.isdigit() else Kind.FLOAT
                 append(Token(kind, lexeme, *span))
-            elif group == "string":
+            elif index == _STRING:
                 closed = (
                     len(lexeme) >= 2 and lexeme.endswith('"') and not _escaped_quote_at_end(lexeme)
                 )

@@ -58,8 +58,13 @@ class _Parser:
         return self.at(Kind.IDENT, word)
 
     def accept(self, kind: Kind, text: str | None = None) -> Token | None:
-        if self.at(kind, text):
-            return self.advance()
+        token = self.tok
+        if token.kind is kind and (text is None or token.text == text):
+            # advance() inlined: this runs for most tokens (never with kind EOF)
+            self.pos += 1
+            self.previous = token
+            self.tok = self.tokens[self.pos]
+            return token
         return None
 
     def error(
@@ -73,14 +78,14 @@ class _Parser:
         return _SyntaxError()
 
     def expect(self, kind: Kind, context: str) -> Token:
-        if self.at(kind):
-            return self.advance()
-        raise self.error(f"expected {kind.value} {context}, found {self.tok.describe()}")
-
-    def keyword(self, word: str, context: str) -> Token:
-        if self.at_keyword(word):
-            return self.advance()
-        raise self.error(f"expected '{word}' {context}, found {self.tok.describe()}")
+        token = self.tok
+        if token.kind is kind:
+            # advance() inlined: this runs for most tokens (never with kind EOF)
+            self.pos += 1
+            self.previous = token
+            self.tok = self.tokens[self.pos]
+            return token
+        raise self.error(f"expected {kind.value} {context}, found {token.describe()}")
 
     def ident(self, what: str, *, allow_query: bool = False) -> Token:
         token = self.tok
