@@ -1,0 +1,95 @@
+"""The fast explorer against the MCC oracles in ``shared/conformance`` (exact numbers).
+
+Every model of ``oracle.yaml`` with at most `MAX_TEST_STATES` reachable markings is
+explored completely; its state and edge counts, token maxima, deadlock verdict and every
+UpperBounds query must equal the oracle. ``null`` oracle values skip just that field.
+The 7 large models (1.8 M to 14.3 M markings) are for ``bench/statespace.py``.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+from typing import Any
+
+import pytest
+import yaml
+
+from analysis.statespace import StateSpace, explore
+from coral_lang.pnml import read_pnml
+from tests.conftest import CONFORMANCE
+
+MAX_TEST_STATES = 300_000
+SLOW_STATES = 50_000  # models above this are marked slow (still run in CI)
+
+
+def _oracle() -> list[dict[str, Any]]:
+    path = CONFORMANCE / "oracle.yaml"
+    if not path.exists():
+        return []
+    with path.open() as handle:
+        models: list[dict[str, Any]] = yaml.safe_load(handle)["models"]
+    return models
+
+
+MODELS = {m["model"]: m for m in _oracle() if (m["states"] or 0) <= MAX_TEST_STATES}
+
+
+def _param(name: str) -> Any:
+    marks = [pytest.mark.slow] if MODELS[name]["states"] > SLOW_STATES else []
+    return pytest.param(name, marks=marks, id=name)
+
+
+@cache
+def _explored(name: str) -> StateSpace:
+    net = read_pnml(CONFORMANCE / MODELS[name]["pnml"])
+    return explore(net, max_states=2 * MAX_TEST_STATES)
+
+
+def test_the_oracle_has_the_documented_small_models() -> None:
+    if not MODELS:
+        pytest.skip("shared/conformance is not available")
+    assert len(MODELS) == 40
+
+
+@pytest.mark.parametrize("name", [_param(n) for n in MODELS])
+def test_state_space_numbers_match_the_oracle(name: str) -> None:
+    oracle = MODELS[name]
+    space = _explored(name)
+    assert space.complete, space.stopped_reason
+    found = {
+        "states": space.states,
+        "edges": space.edges,
+        "max_tokens_place": space.max_tokens_place,
+        "max_tokens_marking": space.max_tokens_marking,
+        "deadlock": space.has_deadlock,
+    }
+    expected = {key: oracle[key] for key in found if oracle.get(key) is not None}
+    assert {key: found[key] for key in expected} == expected
+
+
+@pytest.mark.parametrize("name", [_param(n) for n in MODELS])
+def test_upper_bounds_match_the_oracle(name: str) -> None:
+    oracle = MODELS[name]
+    space = _explored(name)
+    queries = [q for q in oracle.get("upper_bounds") or [] if q.get("bound") is not None]
+    if not queries:
+        pytest.skip("no UpperBounds oracle")
+    net = space.net
+    found = {q["id"]: space.max_sum([net.place_index(p) for p in q["places"]]) for q in queries}
+    assert found == {q["id"]: q["bound"] for q in queries}
+
+
+@pytest.mark.parametrize("name", [_param(n) for n in MODELS if MODELS[n]["deadlock"]])
+def test_dead_markings_have_shortest_traces_that_replay(name: str) -> None:
+    space = _explored(name)
+    assert space.has_deadlock
+    net = space.net
+    for index in space.deadlocks[:5].tolist():
+        marking = net.initial_marking()
+        trace = space.trace_to(index)
+        for t in trace:
+            assert net.enabled(marking, net.transitions[t])
+            marking = net.fire(marking, net.transitions[t])
+        assert marking == space.marking(index)
+        assert len(trace) == space.depth_of(index)
+        assert not any(net.enabled(marking, tr) for tr in net.transitions)
