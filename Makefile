@@ -12,8 +12,20 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
+# The paper's pool mission: compile it, verify it (report in out/), and fly the
+# simulated ROMEO through it with a scripted driver (plots in out/sim/). The CORAL
+# engine and the emulated Internet link replace the scripted driver with the runtime.
+MISSION := examples/pool_mission/pool_mission.coral
+
 demo: $(STAMP)
-	$(BIN)/python -m coral_lang.demo examples/pool_mission/pool_mission.coral
+	@mkdir -p out
+	$(BIN)/python -m coral_lang.demo $(MISSION)
+	$(BIN)/coral-check verify $(MISSION) -o out/pool_mission.verification.txt
+	$(BIN)/coral-check verify $(MISSION) --format json -o out/pool_mission.verification.json
+	@cat out/pool_mission.verification.txt
+	$(BIN)/romeo-sim mission --out out/sim --seed 0
+	@echo "verification report: out/pool_mission.verification.txt (.json)"
+	@echo "simulated run, logs and plots: out/sim/ (mission.png, phase*.png, *.csv)"
 
 test: lint typecheck unit
 
@@ -30,6 +42,8 @@ unit: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python bench/compile.py
+	$(BIN)/python bench/statespace.py
+	$(BIN)/python bench/sim.py
 
 clean:
 	rm -rf $(VENV) out .mypy_cache .pytest_cache .ruff_cache .hypothesis

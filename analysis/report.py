@@ -1,0 +1,295 @@
+"""What verification found: one verdict per property, with the evidence and the method.
+
+A verdict is one of three words and nothing else:
+
+* ``proven``: the property holds in every reachable marking; ``method`` says how it
+  was shown (the complete explicit state space, the state equation, coverability...);
+* ``violated``: a counterexample exists and is attached as evidence (a firing
+  sequence from the initial marking that anyone can replay);
+* ``inconclusive``: neither could be shown within the budgets; ``detail`` says why.
+
+The JSON form (`Report.to_dict`) is documented in ``docs/verify.md`` and is stable:
+keys are only ever added.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from coral_lang.diagnostics import Span
+from coral_lang.net import Net, TransitionKind
+
+REPORT_FORMAT_VERSION = 1
+
+
+class Verdict(enum.Enum):
+    """The three possible answers for a property."""
+
+    PROVEN = "proven"
+    VIOLATED = "violated"
+    INCONCLUSIVE = "inconclusive"
+
+
+_SEVERITY = {Verdict.PROVEN: 0, Verdict.INCONCLUSIVE: 1, Verdict.VIOLATED: 2}
+
+
+@dataclass(frozen=True)
+class Step:
+    """One firing in a trace: which transition, what it means, where it was written."""
+
+    number: int
+    transition: str
+    kind: str
+    description: str
+    span: Span | None = None
+    command: str | None = None
+    reply: str | None = None
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON form."""
+        return {
+            "step": self.number,
+            "transition": self.transition,
+            "kind": self.kind,
+            "description": self.description,
+            "command": self.command,
+            "reply": self.reply,
+            "location": self.span.to_dict() if self.span else None,
+        }
+
+    def render(self) -> str:
+        """E.g. ``  3. check_depth: DEPTH? replied timeout   (phase1.coral:30)``."""
+        where = f"   ({self.span.file}:{self.span.line})" if self.span else ""
+        return f"{self.number:4d}. {self.description}{where}"
+
+
+def make_trace(net: Net, transitions: Sequence[int], start: int = 1) -> tuple[Step, ...]:
+    """Steps for a sequence of transition indices of ``net``."""
+    steps = []
+    for offset, index in enumerate(transitions):
+        tr = net.transitions[index]
+        command = None
+        if tr.kind is TransitionKind.COMMAND and tr.command is not None:
+            command = tr.command.name
+        elif tr.kind is TransitionKind.REPLY:
+            command = tr.label or None
+        steps.append(
+            Step(
+                number=start + offset,
+                transition=tr.name,
+                kind=tr.kind.value,
+                description=tr.describe(),
+                span=tr.span,
+                command=command,
+                reply=tr.reply,
+            )
+        )
+    return tuple(steps)
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """Why a verdict holds: a trace to a marking, or a pumping loop, or an explanation."""
+
+    trace: tuple[Step, ...] = ()
+    marking: dict[str, int] | None = None
+    loop: tuple[Step, ...] = ()
+    note: str = ""
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON form."""
+        return {
+            "trace": [s.to_dict() for s in self.trace],
+            "marking": self.marking,
+            "loop": [s.to_dict() for s in self.loop],
+            "note": self.note,
+        }
+
+
+@dataclass(frozen=True)
+class PropertyResult:
+    """The verdict on one property.
+
+    Attributes:
+        key: Stable identifier: ``deadlock``, ``bounded``, ``final_reachable``,
+            ``dead_transitions``, ``never_marked_places``, ``resource_conflicts``, or
+            ``assert:N`` for the N-th assertion of the mission (from 1).
+        title: What the property says, for people.
+        verdict: proven, violated or inconclusive.
+        method: What decided it.
+        detail: One or two sentences: the figure, the reason, the limit that was hit.
+        evidence: Trace or loop when violated (or a witness when a reachability
+            property is proven).
+        span: Where the property was written (assertions).
+        items: Names involved (unbounded places, dead transitions, ...).
+    """
+
+    key: str
+    title: str
+    verdict: Verdict
+    method: str
+    detail: str
+    evidence: Evidence | None = None
+    span: Span | None = None
+    items: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON form."""
+        return {
+            "key": self.key,
+            "title": self.title,
+            "verdict": self.verdict.value,
+            "method": self.method,
+            "detail": self.detail,
+            "items": list(self.items),
+            "location": self.span.to_dict() if self.span else None,
+            "evidence": self.evidence.to_dict() if self.evidence else None,
+        }
+
+
+@dataclass(frozen=True)
+class StateSpaceFigures:
+    """Size of the explored state space (of the reduced graph when ``reduced``)."""
+
+    states: int
+    edges: int
+    max_tokens_place: int
+    max_tokens_marking: int
+    place_bounds: dict[str, int]
+    complete: bool
+    stopped_reason: str | None
+    reduced: bool
+    seconds: float
+    bytes_per_state: float
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON form."""
+        return {
+            "states": self.states,
+            "edges": self.edges,
+            "max_tokens_place": self.max_tokens_place,
+            "max_tokens_marking": self.max_tokens_marking,
+            "place_bounds": self.place_bounds,
+            "complete": self.complete,
+            "stopped_reason": self.stopped_reason,
+            "reduced": self.reduced,
+            "seconds": round(self.seconds, 6),
+            "bytes_per_state": round(self.bytes_per_state, 2),
+        }
+
+
+@dataclass
+class Report:
+    """Everything `analysis.verify` found about one net."""
+
+    net_name: str
+    digest: str
+    sources: tuple[str, ...]
+    statespace: StateSpaceFigures
+    properties: list[PropertyResult]
+    structure: dict[str, object] = field(default_factory=dict)
+    seconds: float = 0.0
+
+    @property
+    def verdict(self) -> Verdict:
+        """The worst verdict over all properties (violated > inconclusive > proven)."""
+        return max(
+            (p.verdict for p in self.properties), key=_SEVERITY.__getitem__, default=Verdict.PROVEN
+        )
+
+    def property(self, key: str) -> PropertyResult:
+        """The result for ``key``; KeyError if it was not checked."""
+        for result in self.properties:
+            if result.key == key:
+                return result
+        raise KeyError(key)
+
+    def exit_code(self) -> int:
+        """0 all proven, 1 some violated, 3 some inconclusive (and none violated)."""
+        return {Verdict.PROVEN: 0, Verdict.VIOLATED: 1, Verdict.INCONCLUSIVE: 3}[self.verdict]
+
+    def to_dict(self) -> dict[str, object]:
+        """The stable JSON form (see ``docs/verify.md``)."""
+        deadlock = self.property("deadlock")
+        bounded = self.property("bounded")
+        return {
+            "format": REPORT_FORMAT_VERSION,
+            "net": {"name": self.net_name, "digest": self.digest, "sources": list(self.sources)},
+            "verdict": self.verdict.value,
+            "statespace": self.statespace.to_dict(),
+            "deadlock": {
+                "verdict": deadlock.verdict.value,
+                "method": deadlock.method,
+                "trace": [s.to_dict() for s in deadlock.evidence.trace]
+                if deadlock.evidence
+                else [],
+                "marking": deadlock.evidence.marking if deadlock.evidence else None,
+            },
+            "bounded": {
+                "verdict": bounded.verdict.value,
+                "method": bounded.method,
+                "unbounded_places": list(bounded.items),
+            },
+            "properties": [p.to_dict() for p in self.properties],
+            "structure": self.structure,
+            "seconds": round(self.seconds, 6),
+        }
+
+    def render_text(self, color: bool = False) -> str:
+        """A report for a terminal; ``color`` adds ANSI colours to the verdicts."""
+        paint = _Paint(color)
+        space = self.statespace
+        lines = [
+            f"net '{self.net_name}'  {self.digest}",
+            f"state space: {space.states} states, {space.edges} edges"
+            + ("" if space.complete else f" (incomplete: {space.stopped_reason})")
+            + (" (partial-order reduced)" if space.reduced else "")
+            + f"; at most {space.max_tokens_place} token(s) in a place, "
+            f"{space.max_tokens_marking} in a marking; {space.seconds:.3f} s",
+        ]
+        width = max((len(p.title) for p in self.properties), default=10)
+        for result in self.properties:
+            lines.append(
+                f"  {paint(result.verdict)}  {result.title.ljust(width)}  [{result.method}]"
+            )
+            if result.detail:
+                lines.append(f"      {result.detail}")
+            if result.evidence and result.verdict is not Verdict.PROVEN:
+                lines.extend("      " + step.render() for step in result.evidence.trace)
+                if result.evidence.loop:
+                    lines.append("      then repeat:")
+                    lines.extend("      " + step.render() for step in result.evidence.loop)
+                if result.evidence.marking is not None:
+                    lines.append(f"      reaching {_format_marking(result.evidence.marking)}")
+                if result.evidence.note:
+                    lines.append(f"      {result.evidence.note}")
+        counts = {v: sum(1 for p in self.properties if p.verdict is v) for v in Verdict}
+        lines.append(
+            f"{paint(self.verdict)}: {counts[Verdict.PROVEN]} proven, "
+            f"{counts[Verdict.VIOLATED]} violated, {counts[Verdict.INCONCLUSIVE]} inconclusive"
+        )
+        return "\n".join(lines)
+
+
+def _format_marking(marking: dict[str, int]) -> str:
+    if not marking:
+        return "the empty marking"
+    return "{ " + ", ".join(p if n == 1 else f"{p}*{n}" for p, n in marking.items()) + " }"
+
+
+_COLOURS = {Verdict.PROVEN: "32", Verdict.VIOLATED: "31", Verdict.INCONCLUSIVE: "33"}
+
+
+class _Paint:
+    """Verdict words, padded, in ANSI colour when asked (terminals only, never pipes)."""
+
+    def __init__(self, color: bool) -> None:
+        self.color = color
+
+    def __call__(self, verdict: Verdict) -> str:
+        word = verdict.value.upper().ljust(12)
+        if not self.color:
+            return word
+        return f"\033[{_COLOURS[verdict]}m{word}\033[0m"

@@ -1,0 +1,740 @@
+"""``verify(net) -> Report``: what a mission can do, decided before it runs.
+
+Methods, cheapest first, each verdict saying which one decided it:
+
+1. explicit state space (`analysis.statespace`): exact when it completes within the
+   budget; counterexamples found in it are real, with a shortest trace, even when it
+   does not complete;
+2. Karp-Miller coverability (`analysis.coverability`): boundedness when the state
+   space is too large or infinite, with a replayable pumping trace;
+3. the z3 state equation (`analysis.stateeq`): proves bad markings unreachable
+   without enumerating states. A solution of the equation is not a counterexample:
+   unless the search found the bad marking, the verdict is then inconclusive;
+4. structural results (invariants, structural boundedness, siphons and traps,
+   net class) for the report.
+
+Mission semantics (``docs/language.md``): a dead marking that is a declared final
+marking is proper termination; any other dead marking is a deadlock. Resource
+conflicts are markings with two commands in flight that drive one vehicle resource.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from analysis import stateeq
+from analysis.coverability import coverability
+from analysis.progress import ProgressCallback
+from analysis.report import (
+    Evidence,
+    PropertyResult,
+    Report,
+    StateSpaceFigures,
+    Verdict,
+    make_trace,
+)
+from analysis.statespace import StateSpace, explore
+from coral_lang.diagnostics import Span
+from coral_lang.net import AssertKind, Net, PlaceKind
+
+Markings = npt.NDArray[np.int64]
+Predicate = Callable[[Markings], npt.NDArray[np.bool_]]
+
+EXPLICIT = "explicit state space"
+REALISED = "state equation, solution realised as a firing sequence"
+STRUCTURE_SECONDS = 2.0  # each structural computation; results say when they were cut off
+QUICK_COVERABILITY_NODES = 2_000
+QUICK_COVERABILITY_SECONDS = 1.0
+COVERABILITY_SECONDS = 10.0
+UNBOUNDED_STATES = 20_000
+REALISE_NODES = 20_000  # firing orders tried to turn a state-equation solution into a trace
+UNBOUNDED_SECONDS = 3.0
+EXPLICIT_POR = "explicit state space (stubborn-set reduced)"
+
+
+@dataclass(frozen=True)
+class VerifyOptions:
+    """Budgets and switches for `verify`.
+
+    Attributes:
+        max_states: State budget for the explicit search (None: no limit).
+        time_limit: Seconds for the explicit search (None: no limit).
+        por: Explore a stubborn-set reduced graph: keeps every deadlock and the values
+            of the places properties look at, with fewer states. State counts then
+            describe the reduced graph; bounds come from coverability.
+        structural: Also compute invariants, structural boundedness, siphons/traps.
+        z3_timeout_ms: Time limit of each z3 query.
+        coverability_nodes: Node budget of the Karp-Miller tree grown when the explicit
+            search is incomplete (a small tree is always built first: it proves an
+            unbounded net unbounded in milliseconds).
+        progress: Called during long explorations (see `analysis.progress`).
+    """
+
+    max_states: int | None = 2_000_000
+    time_limit: float | None = 120.0
+    por: bool = False
+    structural: bool = True
+    z3_timeout_ms: int = 10_000
+    coverability_nodes: int = 20_000
+    progress: ProgressCallback | None = None
+
+
+def verify(net: Net, options: VerifyOptions | None = None) -> Report:
+    """Decide every property of ``net``; see the module docstring for the methods."""
+    options = options or VerifyOptions()
+    started = time.perf_counter()
+    checker = _Checker(net, options)
+    properties = [
+        checker.bounded(),
+        checker.deadlock(),
+        *checker.final_reachable(),
+        checker.dead_transitions(),
+        checker.never_marked_places(),
+        *checker.resource_conflicts(),
+        *checker.assertions(),
+    ]
+    structure = checker.structure() if options.structural else {}
+    return Report(
+        net_name=net.name,
+        digest=net.digest(),
+        sources=net.sources,
+        statespace=checker.figures(),
+        properties=properties,
+        structure=structure,
+        seconds=time.perf_counter() - started,
+    )
+
+
+class _Checker:
+    def __init__(self, net: Net, options: VerifyOptions) -> None:
+        self.net = net
+        self.options = options
+        visible = None
+        if options.por:
+            watched = {p for a in net.assertions for p, _ in a.places}
+            watched |= {p.name for p in net.places if p.kind is PlaceKind.PENDING and p.resources}
+            for final in net.finals:
+                watched |= {p for p, _ in final.tokens}
+            visible = sorted(watched)
+        # A small Karp-Miller tree first: on an unbounded net it proves unboundedness in
+        # milliseconds, and the explicit search is then only worth a small budget (it
+        # can still find real counterexamples for the other properties).
+        self.cover = coverability(
+            net, max_nodes=QUICK_COVERABILITY_NODES, time_limit=QUICK_COVERABILITY_SECONDS
+        )
+        max_states, time_limit = options.max_states, options.time_limit
+        if self.cover.bounded is False:
+            max_states = min(max_states or UNBOUNDED_STATES, UNBOUNDED_STATES)
+            time_limit = min(time_limit or UNBOUNDED_SECONDS, UNBOUNDED_SECONDS)
+        self.space: StateSpace = explore(
+            net,
+            max_states=max_states,
+            time_limit=time_limit,
+            por=options.por,
+            visible=visible,
+            progress=options.progress,
+        )
+        self.exact = self.space.complete and not self.space.reduced
+        self.method = EXPLICIT_POR if self.space.reduced else EXPLICIT
+
+    # -- helpers ------------------------------------------------------------------------
+
+    def figures(self) -> StateSpaceFigures:
+        space = self.space
+        return StateSpaceFigures(
+            states=space.states,
+            edges=space.edges,
+            max_tokens_place=space.max_tokens_place,
+            max_tokens_marking=space.max_tokens_marking,
+            place_bounds={
+                p.name: int(b) for p, b in zip(self.net.places, space.place_bounds, strict=True)
+            },
+            complete=space.complete,
+            stopped_reason=space.stopped_reason,
+            reduced=space.reduced,
+            seconds=space.seconds,
+            bytes_per_state=space.bytes_per_state,
+        )
+
+    def _incomplete(self) -> str:
+        if self.space.reduced and self.space.complete:
+            return "the reduced state space does not decide this"
+        return f"the state space is incomplete ({self.space.stopped_reason})"
+
+    def _witness(self, state: int) -> Evidence:
+        return Evidence(
+            trace=make_trace(self.net, self.space.trace_to(state)),
+            marking=self.net.marking_dict(self.space.marking(state)),
+        )
+
+    def _search_then_prove(
+        self,
+        key: str,
+        title: str,
+        predicate: Predicate,
+        bad: stateeq.BadMarkings,
+        location: Span | None = None,
+        found_detail: str = "",
+    ) -> PropertyResult:
+        """A safety property: violated if search finds a bad marking, proven if the
+        search was exhaustive or the state equation excludes bad markings."""
+        hit = self.space.find(predicate)
+        if hit is not None:
+            depth = self.space.depth_of(hit)
+            return PropertyResult(
+                key,
+                title,
+                Verdict.VIOLATED,
+                self.method,
+                found_detail or f"reachable in {depth} step(s); shortest trace below",
+                self._witness(hit),
+                location,
+            )
+        if self.space.complete and (not self.space.reduced or self.options.por):
+            # the reduced graph keeps every value of the visible places it watches
+            return PropertyResult(
+                key,
+                title,
+                Verdict.PROVEN,
+                self.method,
+                f"no bad marking among all {self.space.states} reachable states",
+                None,
+                location,
+            )
+        result, evidence = self._state_equation(bad)
+        if isinstance(result, stateeq.Proven):
+            return PropertyResult(
+                key, title, Verdict.PROVEN, result.method, result.explain(), None, location
+            )
+        if evidence is not None:
+            return PropertyResult(
+                key,
+                title,
+                Verdict.VIOLATED,
+                REALISED,
+                f"reachable in {len(evidence.trace)} step(s) (not necessarily shortest)",
+                evidence,
+                location,
+            )
+        return PropertyResult(
+            key,
+            title,
+            Verdict.INCONCLUSIVE,
+            f"{self.method}; {result.method}",
+            f"{self._incomplete()}; {result.explain()}",
+            None,
+            location,
+        )
+
+    def _state_equation(
+        self, bad: stateeq.BadMarkings, time_limit: float = 30.0
+    ) -> tuple[stateeq.StateEquationResult, Evidence | None]:
+        """Run the state equation; a Candidate is confirmed only if some firing order of
+        its counts replays on the net and ends in a bad marking (then it is real)."""
+        result = stateeq.check_unreachable(
+            self.net, bad, timeout_ms=self.options.z3_timeout_ms, time_limit=time_limit
+        )
+        if not isinstance(result, stateeq.Candidate):
+            return result, None
+        sequence = stateeq.realise(self.net, result, max_nodes=REALISE_NODES)
+        if sequence is None:
+            return result, None
+        marking = self.net.initial_marking()
+        for t in sequence:
+            transition = self.net.transitions[t]
+            if not self.net.enabled(marking, transition):
+                return result, None
+            marking = self.net.fire(marking, transition)
+        if not bad.matches(self.net, marking):
+            return result, None
+        return result, Evidence(
+            trace=make_trace(self.net, sequence),
+            marking=self.net.marking_dict(marking),
+            note="found by ordering a solution of the state equation; replayed on the net",
+        )
+
+    # -- properties -----------------------------------------------------------------------
+
+    def bounded(self) -> PropertyResult:
+        title = "the net is bounded"
+        if self.exact:
+            return PropertyResult(
+                "bounded",
+                title,
+                Verdict.PROVEN,
+                self.method,
+                f"every place holds at most {self.space.max_tokens_place} token(s) "
+                f"in all {self.space.states} reachable states",
+            )
+        result = self.cover
+        if result.bounded is None:  # the quick tree was cut off: grow a full one
+            result = coverability(
+                self.net,
+                max_nodes=self.options.coverability_nodes,
+                time_limit=COVERABILITY_SECONDS,
+            )
+        if result.bounded is False:
+            name = result.unbounded[0]
+            pump = result.pumps.get(name)
+            evidence = None
+            if pump is not None:
+                evidence = Evidence(
+                    trace=make_trace(self.net, pump.prefix),
+                    loop=make_trace(self.net, pump.loop, start=len(pump.prefix) + 1),
+                    note=pump.explain(),
+                )
+            return PropertyResult(
+                "bounded",
+                title,
+                Verdict.VIOLATED,
+                result.method,
+                result.explain(),
+                evidence,
+                items=result.unbounded,
+            )
+        if result.bounded:
+            return PropertyResult("bounded", title, Verdict.PROVEN, result.method, result.explain())
+        from analysis.structural import structural_boundedness
+
+        structural = structural_boundedness(
+            self.net, timeout_ms=self.options.z3_timeout_ms, per_place=False
+        )
+        if structural.structurally_bounded:
+            return PropertyResult(
+                "bounded", title, Verdict.PROVEN, structural.method, structural.explain()
+            )
+        return PropertyResult(
+            "bounded",
+            title,
+            Verdict.INCONCLUSIVE,
+            f"{self.method}; {result.method}",
+            f"{self._incomplete()}; {result.explain()}",
+        )
+
+    def deadlock(self) -> PropertyResult:
+        net = self.net
+        title = "no deadlock (every dead marking is a declared final marking)"
+        if not net.finals:
+            title = "no deadlock (no reachable marking without an enabled transition)"
+        finals = set(net.final_markings())
+        for state in self.space.deadlocks[:100_000]:
+            marking = self.space.marking(int(state))
+            if marking in finals:
+                continue
+            depth = self.space.depth_of(int(state))
+            shortest = "" if self.space.reduced else "shortest "
+            what = (
+                "a dead marking that is not a declared final marking"
+                if finals
+                else ("a marking in which no transition is enabled")
+            )
+            return PropertyResult(
+                "deadlock",
+                title,
+                Verdict.VIOLATED,
+                self.method,
+                f"{what} is reachable in {depth} step(s); {shortest}trace below",
+                self._witness(int(state)),
+            )
+        if self.space.complete:
+            ends = len(self.space.deadlocks)
+            return PropertyResult(
+                "deadlock",
+                title,
+                Verdict.PROVEN,
+                self.method,
+                f"all {self.space.states} reachable states explored; "
+                f"{ends} dead marking(s), all declared final",
+            )
+        result, evidence = self._state_equation(stateeq.unexpected_deadlocks(net))
+        if isinstance(result, stateeq.Proven):
+            return PropertyResult(
+                "deadlock", title, Verdict.PROVEN, result.method, result.explain()
+            )
+        if evidence is not None:
+            return PropertyResult(
+                "deadlock",
+                title,
+                Verdict.VIOLATED,
+                REALISED,
+                f"a deadlock is reachable in {len(evidence.trace)} step(s) "
+                "(not necessarily shortest)",
+                evidence,
+            )
+        return PropertyResult(
+            "deadlock",
+            title,
+            Verdict.INCONCLUSIVE,
+            f"{self.method}; {result.method}",
+            f"{self._incomplete()}; {result.explain()}",
+        )
+
+    def final_reachable(self) -> list[PropertyResult]:
+        net = self.net
+        if not net.finals:
+            return []
+        title = "a declared final marking is reachable"
+        finals = np.array(net.final_markings(), dtype=np.int64)
+
+        def is_final(block: Markings) -> npt.NDArray[np.bool_]:
+            hits: npt.NDArray[np.bool_] = (
+                (block[:, None, :] == finals[None, :, :]).all(axis=2).any(axis=1)
+            )
+            return hits
+
+        hit = self.space.find(is_final)
+        if hit is not None:
+            return [
+                PropertyResult(
+                    "final_reachable",
+                    title,
+                    Verdict.PROVEN,
+                    self.method,
+                    f"{_marking_text(self.net.marking_dict(self.space.marking(hit)))} reached in "
+                    f"{self.space.depth_of(hit)} step(s) (witness trace in the JSON report)",
+                    self._witness(hit),
+                )
+            ]
+        if self.exact:
+            return [
+                PropertyResult(
+                    "final_reachable",
+                    title,
+                    Verdict.VIOLATED,
+                    self.method,
+                    f"none of the {len(net.finals)} final marking(s) is among all "
+                    f"{self.space.states} reachable states: the mission can never end properly",
+                )
+            ]
+        return [
+            PropertyResult(
+                "final_reachable",
+                title,
+                Verdict.INCONCLUSIVE,
+                self.method,
+                f"no final marking found; {self._incomplete()}",
+            )
+        ]
+
+    def dead_transitions(self) -> PropertyResult:
+        title = "every transition can fire (no dead transitions)"
+        never = [self.net.transitions[int(t)].name for t in self.space.dead_transitions]
+        if not never:
+            return PropertyResult(
+                "dead_transitions",
+                title,
+                Verdict.PROVEN,
+                self.method,
+                f"all {len(self.net.transitions)} transitions fire in some reachable state",
+            )
+        if self.exact:
+            shown = ", ".join(never[:10]) + (" ..." if len(never) > 10 else "")
+            return PropertyResult(
+                "dead_transitions",
+                title,
+                Verdict.VIOLATED,
+                self.method,
+                f"{len(never)} transition(s) can never fire: {shown}",
+                items=tuple(never),
+            )
+        return PropertyResult(
+            "dead_transitions",
+            title,
+            Verdict.INCONCLUSIVE,
+            self.method,
+            f"{len(never)} transition(s) not seen firing; {self._incomplete()}",
+            items=tuple(never),
+        )
+
+    def never_marked_places(self) -> PropertyResult:
+        title = "every place can be marked"
+        unmarked = [
+            p.name
+            for p, bound in zip(self.net.places, self.space.place_bounds, strict=True)
+            if bound == 0 and p.kind is PlaceKind.MISSION
+        ]
+        if not unmarked:
+            return PropertyResult(
+                "never_marked_places",
+                title,
+                Verdict.PROVEN,
+                self.method,
+                "every place holds a token in some reachable state",
+            )
+        if self.exact:
+            return PropertyResult(
+                "never_marked_places",
+                title,
+                Verdict.VIOLATED,
+                self.method,
+                f"{len(unmarked)} place(s) never hold a token: {', '.join(unmarked[:10])}"
+                + (" ..." if len(unmarked) > 10 else ""),
+                items=tuple(unmarked),
+            )
+        return PropertyResult(
+            "never_marked_places",
+            title,
+            Verdict.INCONCLUSIVE,
+            self.method,
+            f"{len(unmarked)} place(s) not seen marked; {self._incomplete()}",
+            items=tuple(unmarked),
+        )
+
+    def resource_conflicts(self) -> list[PropertyResult]:
+        net = self.net
+        pending = [p for p in net.places if p.kind is PlaceKind.PENDING and p.resources]
+        if not pending:
+            return []
+        pairs = [
+            (a, b)
+            for a, b in itertools.combinations(pending, 2)
+            if set(a.resources) & set(b.resources)
+        ]
+        columns = [(net.place_index(a.name), net.place_index(b.name)) for a, b in pairs]
+        singles = [net.place_index(p.name) for p in pending]
+
+        def conflict(block: Markings) -> npt.NDArray[np.bool_]:
+            hit = np.zeros(len(block), dtype=bool)
+            for i, j in columns:
+                hit |= (block[:, i] > 0) & (block[:, j] > 0)
+            for i in singles:
+                hit |= block[:, i] > 1
+            return hit
+
+        title = "no two commands in flight on one vehicle resource"
+        hit = self.space.find(conflict)
+        if hit is not None:
+            marking = self.space.marking(hit)
+            busy = [p for p in pending if marking[net.place_index(p.name)] > 0]
+            shared = sorted(
+                {
+                    r
+                    for a, b in itertools.combinations(busy, 2)
+                    for r in set(a.resources) & set(b.resources)
+                }
+                | {r for p in busy if marking[net.place_index(p.name)] > 1 for r in p.resources}
+            )
+            names = [p.pending_of or p.name for p in busy]
+            return [
+                PropertyResult(
+                    "resource_conflicts",
+                    title,
+                    Verdict.VIOLATED,
+                    self.method,
+                    f"{' and '.join(names)} in flight together, both driving {', '.join(shared)}; "
+                    f"reachable in {self.space.depth_of(hit)} step(s)",
+                    self._witness(hit),
+                    items=tuple(names),
+                )
+            ]
+        if self.space.complete:
+            return [
+                PropertyResult(
+                    "resource_conflicts",
+                    title,
+                    Verdict.PROVEN,
+                    self.method,
+                    f"checked {len(pairs)} pair(s) of commands sharing a resource "
+                    f"in all {self.space.states} reachable states",
+                )
+            ]
+        unproven = []
+        for a, b in pairs:
+            result = stateeq.check_unreachable(
+                net,
+                stateeq.never_together([a.name, b.name]),
+                timeout_ms=self.options.z3_timeout_ms,
+                time_limit=10.0,
+            )
+            if not isinstance(result, stateeq.Proven):
+                unproven.append(f"{a.pending_of} with {b.pending_of}")
+        for p in pending:
+            result = stateeq.check_unreachable(
+                net,
+                stateeq.above_bound([p.name], 1),
+                timeout_ms=self.options.z3_timeout_ms,
+                time_limit=10.0,
+            )
+            if not isinstance(result, stateeq.Proven):
+                unproven.append(f"{p.pending_of} twice")
+        if not unproven:
+            return [
+                PropertyResult(
+                    "resource_conflicts",
+                    title,
+                    Verdict.PROVEN,
+                    stateeq.METHOD,
+                    f"the state equation excludes all {len(pairs)} conflicting pair(s)",
+                )
+            ]
+        return [
+            PropertyResult(
+                "resource_conflicts",
+                title,
+                Verdict.INCONCLUSIVE,
+                f"{self.method}; {stateeq.METHOD}",
+                f"{self._incomplete()}; not excluded: {', '.join(unproven[:5])}",
+            )
+        ]
+
+    def assertions(self) -> list[PropertyResult]:
+        results = []
+        for number, assertion in enumerate(self.net.assertions, start=1):
+            key = f"assert:{number}"
+            title = assertion.describe()
+            columns = [(self.net.place_index(p), w) for p, w in assertion.places]
+
+            def covers(
+                block: Markings, cols: list[tuple[int, int]] = columns
+            ) -> npt.NDArray[np.bool_]:
+                hit = np.ones(len(block), dtype=bool)
+                for i, w in cols:
+                    hit &= block[:, i] >= w
+                return hit
+
+            constraints = tuple(
+                stateeq.PlaceConstraint(((p, 1),), ">=", w) for p, w in assertion.places
+            )
+            if assertion.kind is AssertKind.NEVER:
+                results.append(
+                    self._search_then_prove(
+                        key,
+                        title,
+                        covers,
+                        stateeq.BadMarkings(constraints=constraints, label=title),
+                        assertion.span,
+                    )
+                )
+            elif assertion.kind is AssertKind.BOUND:
+                bound = assertion.bound or 0
+                cols = [i for i, _ in columns]
+
+                def above(
+                    block: Markings, cols: list[int] = cols, k: int = bound
+                ) -> npt.NDArray[np.bool_]:
+                    over: npt.NDArray[np.bool_] = block[:, cols].sum(axis=1) > k
+                    return over
+
+                results.append(
+                    self._search_then_prove(
+                        key,
+                        title,
+                        above,
+                        stateeq.above_bound([p for p, _ in assertion.places], bound),
+                        assertion.span,
+                    )
+                )
+            else:
+                results.append(self._reachable(key, title, covers, constraints, assertion.span))
+        return results
+
+    def _reachable(
+        self,
+        key: str,
+        title: str,
+        predicate: Predicate,
+        constraints: tuple[stateeq.PlaceConstraint, ...],
+        location: Span | None,
+    ) -> PropertyResult:
+        hit = self.space.find(predicate)
+        if hit is not None:
+            return PropertyResult(
+                key,
+                title,
+                Verdict.PROVEN,
+                self.method,
+                f"reached in {self.space.depth_of(hit)} step(s) (witness trace in the JSON report)",
+                self._witness(hit),
+                location,
+            )
+        if self.space.complete:
+            return PropertyResult(
+                key,
+                title,
+                Verdict.VIOLATED,
+                self.method,
+                f"no marking among all {self.space.states} reachable states has these tokens",
+                None,
+                location,
+            )
+        result, evidence = self._state_equation(
+            stateeq.BadMarkings(constraints=constraints, label=title)
+        )
+        if evidence is not None:
+            return PropertyResult(
+                key,
+                title,
+                Verdict.PROVEN,
+                REALISED,
+                f"reached in {len(evidence.trace)} step(s)",
+                evidence,
+                location,
+            )
+        if isinstance(result, stateeq.Proven):
+            return PropertyResult(
+                key,
+                title,
+                Verdict.VIOLATED,
+                result.method,
+                "unreachable: " + result.explain(),
+                None,
+                location,
+            )
+        return PropertyResult(
+            key,
+            title,
+            Verdict.INCONCLUSIVE,
+            f"{self.method}; {result.method}",
+            f"not found; {self._incomplete()}; {result.explain()}",
+            None,
+            location,
+        )
+
+    # -- structure --------------------------------------------------------------------------
+
+    def structure(self) -> dict[str, object]:
+        """Structural facts for the report; each computation has its own time limit."""
+        from analysis.invariants import invariant_report
+        from analysis.siphons import siphon_trap_check
+        from analysis.structural import classify, structural_boundedness
+
+        net = self.net
+        facts: dict[str, object] = {
+            "places": len(net.places),
+            "transitions": len(net.transitions),
+            "arcs": sum(len(t.inputs) + len(t.outputs) for t in net.transitions),
+        }
+        net_class = classify(net)
+        facts["class"] = list(net_class.names())
+        invariants = invariant_report(net, time_limit=STRUCTURE_SECONDS)
+        facts["invariants"] = {
+            "summary": invariants.explain(),
+            "p_invariants": [inv.describe() for inv in invariants.p.invariants[:50]],
+            "t_invariants": [inv.describe() for inv in invariants.t.invariants[:50]],
+            "conservative": invariants.conservative,
+            "covered_by_p_invariants": invariants.covered_by_p,
+            "consistent": invariants.consistent,
+        }
+        bounded = structural_boundedness(
+            net,
+            timeout_ms=self.options.z3_timeout_ms,
+            per_place=False,
+            time_limit=STRUCTURE_SECONDS,
+        )
+        facts["structural_boundedness"] = {
+            "verdict": bounded.structurally_bounded,
+            "summary": bounded.explain(),
+        }
+        siphons = siphon_trap_check(net, time_limit=STRUCTURE_SECONDS)
+        facts["siphons_traps"] = {"summary": siphons.explain()}
+        return facts
+
+
+def _marking_text(marking: dict[str, int]) -> str:
+    return "{ " + ", ".join(p if n == 1 else f"{p}*{n}" for p, n in marking.items()) + " }"
