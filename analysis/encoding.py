@@ -97,26 +97,31 @@ class CompactNet:
         delta = post - pre
         initial = np.array([p.initial for p in net.places], dtype=np.int64)
 
-        sizes = (pre > 0).sum(axis=1)
+        # Per-transition place lists from the arcs (never a scan of a dense row: a
+        # mission can have thousands of places and transitions).
+        presets: list[list[int]] = []
+        raised: list[list[int]] = []
+        for t, tr in enumerate(net.transitions):
+            touched = sorted({net.place_index(name) for name, _ in (*tr.inputs, *tr.outputs)})
+            presets.append([p for p in touched if pre[t, p] > 0])
+            raised.append([p for p in touched if delta[t, p] > 0])
+        sizes = np.array([len(ps) for ps in presets], dtype=np.int64)
         groups = []
         for size in sorted(set(sizes.tolist())):
             members = np.flatnonzero(sizes == size)
             places = np.zeros((members.size, size), dtype=np.int64)
             weights = np.zeros((members.size, size), dtype=np.int64)
             for row, t in enumerate(members.tolist()):
-                cols = np.flatnonzero(pre[t])
-                places[row] = cols
-                weights[row] = pre[t, cols]
+                places[row] = presets[t]
+                weights[row] = pre[t, presets[t]]
             groups.append(PresetGroup(members.astype(np.int64), places, weights))
 
-        increases = delta > 0
-        width = max(1, int(increases.sum(axis=1).max(initial=0)))
+        width = max(1, max((len(r) for r in raised), default=0))
         inc_places = np.full((n_t, width), -1, dtype=np.int64)
         inc_amounts = np.zeros((n_t, width), dtype=np.int64)
-        for t in range(n_t):
-            cols = np.flatnonzero(increases[t])
-            inc_places[t, : cols.size] = cols
-            inc_amounts[t, : cols.size] = delta[t, cols]
+        for t, cols in enumerate(raised):
+            inc_places[t, : len(cols)] = cols
+            inc_amounts[t, : len(cols)] = delta[t, cols]
         max_increase = np.maximum(delta, 0).max(axis=0, initial=0)
         return cls(
             net, pre, post, delta, initial, tuple(groups), inc_places, inc_amounts, max_increase
@@ -235,8 +240,38 @@ MAX_LOAD = 0.5
 _S27, _S29, _S30, _S31 = (np.uint64(k) for k in (27, 29, 30, 31))
 
 
+WIDE_KEYS = 8
+"""From this many words per key, hash and compare with whole-array operations: one
+numpy call per word costs more than the 2-D work once keys are wide (missions with
+thousands of places pack into dozens of words)."""
+
+_WORD_MULTIPLIERS = np.random.default_rng(0x5EED).integers(
+    1, np.iinfo(np.int64).max, size=4096, dtype=np.int64
+).astype(np.uint64) | np.uint64(1)
+
+
+def _multipliers(words: int) -> KeyArray:
+    if words <= _WORD_MULTIPLIERS.size:
+        return _WORD_MULTIPLIERS[:words]
+    reps = -(-words // _WORD_MULTIPLIERS.size)
+    return np.tile(_WORD_MULTIPLIERS, reps)[:words] * np.uint64(0x9E37)
+
+
 def _hash(keys: KeyArray) -> KeyArray:
-    """A well-mixed 64-bit hash of each key row (splitmix64 finaliser)."""
+    """A well-mixed 64-bit hash of each key row (splitmix64 finaliser).
+
+    The hash only chooses slots and sort order; keys are always compared in full, so
+    its quality affects speed, never exactness.
+    """
+    if keys.shape[1] >= WIDE_KEYS:
+        with np.errstate(over="ignore"):
+            mixed: KeyArray = (keys * _multipliers(keys.shape[1])).sum(axis=1, dtype=np.uint64)
+            mixed ^= mixed >> _S30
+            mixed *= _MIX1
+            mixed ^= mixed >> _S27
+            mixed *= _MIX2
+            mixed ^= mixed >> _S31
+        return mixed
     h = keys[:, 0] ^ (keys[:, 0] >> _S30)
     for w in range(1, keys.shape[1]):
         h = (h ^ (h >> _S29)) * _GOLDEN + keys[:, w]
@@ -249,7 +284,11 @@ def _hash(keys: KeyArray) -> KeyArray:
 
 
 def _rows_differ(a: KeyArray, b: KeyArray) -> npt.NDArray[np.bool_]:
-    """Row-wise ``a != b`` over all words, one word at a time (no 2-D reduction)."""
+    """Row-wise ``a != b`` over all words, one word at a time (no 2-D reduction)
+    unless the keys are wide."""
+    if a.shape[1] >= WIDE_KEYS:
+        wide: npt.NDArray[np.bool_] = (a != b).any(axis=1)
+        return wide
     out: npt.NDArray[np.bool_] = a[:, 0] != b[:, 0]
     for w in range(1, a.shape[1]):
         out |= a[:, w] != b[:, w]

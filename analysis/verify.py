@@ -54,6 +54,7 @@ QUICK_COVERABILITY_SECONDS = 1.0
 COVERABILITY_SECONDS = 10.0
 UNBOUNDED_STATES = 20_000
 REALISE_NODES = 20_000  # firing orders tried to turn a state-equation solution into a trace
+DENSE_CELL_LIMIT = 25_000_000  # places x transitions the dense encodings accept (~200 MB)
 UNBOUNDED_SECONDS = 3.0
 EXPLICIT_POR = "explicit state space (stubborn-set reduced)"
 
@@ -89,6 +90,9 @@ def verify(net: Net, options: VerifyOptions | None = None) -> Report:
     """Decide every property of ``net``; see the module docstring for the methods."""
     options = options or VerifyOptions()
     started = time.perf_counter()
+    cells = len(net.places) * len(net.transitions)
+    if cells > DENSE_CELL_LIMIT:
+        return _too_large(net, cells, time.perf_counter() - started)
     checker = _Checker(net, options)
     properties = [
         checker.bounded(),
@@ -108,6 +112,38 @@ def verify(net: Net, options: VerifyOptions | None = None) -> Report:
         properties=properties,
         structure=structure,
         seconds=time.perf_counter() - started,
+    )
+
+
+def _too_large(net: Net, cells: int, seconds: float) -> Report:
+    """Every property inconclusive, saying why: the encodings are dense in places x
+    transitions, and past the limit they would exhaust memory rather than answer."""
+    reason = (
+        f"not analysed: {len(net.places)} places x {len(net.transitions)} transitions = "
+        f"{cells:,} cells, over the {DENSE_CELL_LIMIT:,}-cell limit of the dense "
+        "encodings; split the mission into phases and verify each"
+    )
+    keys = [("bounded", "the net is bounded"), ("deadlock", "no deadlock")]
+    return Report(
+        net_name=net.name,
+        digest=net.digest(),
+        sources=net.sources,
+        statespace=StateSpaceFigures(
+            states=0,
+            edges=0,
+            max_tokens_place=0,
+            max_tokens_marking=0,
+            place_bounds={},
+            complete=False,
+            stopped_reason=reason,
+            reduced=False,
+            seconds=0.0,
+            bytes_per_state=0.0,
+        ),
+        properties=[
+            PropertyResult(key, title, Verdict.INCONCLUSIVE, "none", reason) for key, title in keys
+        ],
+        seconds=seconds,
     )
 
 

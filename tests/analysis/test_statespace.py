@@ -262,3 +262,31 @@ def test_degenerate_nets() -> None:
     assert loop.fired_transitions.tolist() == [True] and loop.dead_transitions.size == 0
     idle = explore(Net("idle", (Place("a", 3),), ()))
     assert idle.marking(0) == (3,) and idle.ever_marked.tolist() == [True]
+
+
+def test_wide_markings_hash_with_whole_arrays_and_stay_exact() -> None:
+    from analysis.encoding import WIDE_KEYS
+
+    # A token walking a 600-place chain while another toggles between two places:
+    # 1,200 states, each marking packed into at least WIDE_KEYS 64-bit words.
+    chain = [Place(f"c{i}", initial=1 if i == 0 else 0) for i in range(600)]
+    places = (*chain, Place("a", initial=1), Place("b"))
+    transitions = [
+        Transition(f"step{i}", inputs=((f"c{i}", 1),), outputs=((f"c{i + 1}", 1),))
+        for i in range(599)
+    ]
+    transitions += [
+        Transition("ab", inputs=(("a", 1),), outputs=(("b", 1),)),
+        Transition("ba", inputs=(("b", 1),), outputs=(("a", 1),)),
+    ]
+    net = Net("wide", places, tuple(transitions))
+    space = explore(net)
+    assert space.layout.n_words >= WIDE_KEYS
+    reference = explore_reference(net, max_states=5_000)
+    assert space.complete and reference.complete
+    assert (
+        (space.states, space.edges)
+        == (len(reference.states), reference.edges)
+        == (1200, 1200 + 599 * 2)
+    )
+    assert {space.marking(i) for i in range(space.states)} == set(reference.states)

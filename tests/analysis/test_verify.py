@@ -255,3 +255,16 @@ def test_state_equation_solution_realised_into_a_replayable_deadlock() -> None:
         marking = net.fire(marking, transition)
     assert not any(net.enabled(marking, t) for t in net.transitions)
     assert net.marking_dict(marking) == deadlock.evidence.marking
+
+
+def test_a_net_too_large_for_the_dense_encodings_is_inconclusive_not_a_crash(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import analysis.verify as verify_module
+
+    monkeypatch.setattr(verify_module, "DENSE_CELL_LIMIT", 100)
+    report = verify(compile_mission(POOL))
+    assert report.verdict is Verdict.INCONCLUSIVE and report.exit_code() == 3
+    assert "58 places x 79 transitions" in report.property("deadlock").detail
+    deadlock = report.to_dict()["deadlock"]
+    assert isinstance(deadlock, dict) and deadlock["verdict"] == "inconclusive"
