@@ -11,23 +11,11 @@ import yaml
 from hypothesis import given, settings
 
 from analysis.coverability import coverability
-from coral_lang.net import Net, Place, Transition
+from coral_lang.net import Net
+from tests.analysis.nets import Arcs, make_net
 from tests.analysis.reference import explore_reference
 from tests.analysis.strategies import small_nets
 from tests.conftest import CONFORMANCE
-
-Arcs = dict[str, int]
-
-
-def _net(name: str, places: dict[str, int], transitions: dict[str, tuple[Arcs, Arcs]]) -> Net:
-    return Net(
-        name,
-        tuple(Place(p, m) for p, m in places.items()),
-        tuple(
-            Transition(t, tuple(ins.items()), tuple(outs.items()))
-            for t, (ins, outs) in transitions.items()
-        ),
-    )
 
 
 def _replay_grows(net: Net, prefix: tuple[str, ...], loop: tuple[str, ...], place: str) -> bool:
@@ -54,7 +42,7 @@ def _replay_grows(net: Net, prefix: tuple[str, ...], loop: tuple[str, ...], plac
 
 
 def test_pump_is_unbounded_with_a_replayable_trace() -> None:
-    net = _net("pump", {"a": 1, "b": 0}, {"t": ({"a": 1}, {"a": 1, "b": 1})})
+    net = make_net("pump", {"a": 1, "b": 0}, {"t": ({"a": 1}, {"a": 1, "b": 1})})
     result = coverability(net)
     assert result.bounded is False and result.complete
     assert result.unbounded == ("b",) and result.bounds == {"a": 1}
@@ -65,7 +53,7 @@ def test_pump_is_unbounded_with_a_replayable_trace() -> None:
 
 
 def test_unbounded_buffer_between_producer_and_consumer() -> None:
-    net = _net(
+    net = make_net(
         "prodcons",
         {"ready": 1, "made": 0, "buffer": 0, "want": 1, "got": 0},
         {
@@ -85,7 +73,7 @@ def test_unbounded_buffer_between_producer_and_consumer() -> None:
 def test_nested_pump_feeds_a_second_one() -> None:
     # q grows by t; u turns a q into a p. The tree's own loop for p (just u) drains q, so
     # the trace must include repetitions of t.
-    net = _net(
+    net = make_net(
         "nested",
         {"a": 1, "b": 1, "q": 0, "p": 0},
         {"t": ({"a": 1}, {"a": 1, "q": 1}), "u": ({"b": 1, "q": 1}, {"b": 1, "p": 1})},
@@ -99,7 +87,7 @@ def test_nested_pump_feeds_a_second_one() -> None:
 
 def test_weighted_pump_needs_a_run_up() -> None:
     # Two tokens must collect in x before the pump can fire at all.
-    net = _net(
+    net = make_net(
         "runup",
         {"s": 2, "x": 0, "y": 0},
         {"load": ({"s": 1}, {"x": 1}), "grow": ({"x": 2}, {"x": 2, "y": 3})},
@@ -111,7 +99,7 @@ def test_weighted_pump_needs_a_run_up() -> None:
 
 
 def test_bounded_net_gives_exact_bounds() -> None:
-    net = _net(
+    net = make_net(
         "mutex",
         {"idle1": 1, "cs1": 0, "idle2": 1, "cs2": 0, "lock": 1},
         {
@@ -130,7 +118,7 @@ def test_bounded_net_gives_exact_bounds() -> None:
 def test_sibling_branches_are_not_compared() -> None:
     # From s, "one" gives (0, 1) and "two" gives (0, 2). (0, 2) strictly covers (0, 1),
     # but they are siblings: comparing them would wrongly make c unbounded.
-    net = _net(
+    net = make_net(
         "siblings",
         {"s": 1, "c": 0},
         {"one": ({"s": 1}, {"c": 1}), "two": ({"s": 1}, {"c": 2})},
@@ -146,7 +134,7 @@ def test_node_budget_stops_the_tree() -> None:
         f"t{i}": ({f"p{i}": 1}, {f"p{i + 1}": 1}) for i in range(n - 1)
     }
     transitions |= {f"s{i}": ({f"p{i}": 1}, {f"p{i}": 1, "count": 1}) for i in range(1)}
-    net = _net("budget", places, transitions)
+    net = make_net("budget", places, transitions)
     result = coverability(net, max_nodes=3)
     assert not result.complete and "node budget" in result.reason
     full = coverability(net)
@@ -155,7 +143,7 @@ def test_node_budget_stops_the_tree() -> None:
 
 def test_time_limit_with_an_injected_clock() -> None:
     n = 6
-    net = _net(
+    net = make_net(
         "line",
         {f"p{i}": 1 if i == 0 else 0 for i in range(n)},
         {f"t{i}": ({f"p{i}": 1}, {f"p{i + 1}": 1}) for i in range(n - 1)},

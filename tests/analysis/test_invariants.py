@@ -16,40 +16,15 @@ from analysis.invariants import (
     t_invariants,
 )
 from analysis.structural import incidence
-from coral_lang.net import Net, Place, Transition
+from coral_lang.net import Net
+from tests.analysis.nets import Arcs, make_net, mutex
 from tests.analysis.reference import explore_reference
 from tests.analysis.strategies import small_nets
-
-Arcs = dict[str, int]
-
-
-def _net(name: str, places: dict[str, int], transitions: dict[str, tuple[Arcs, Arcs]]) -> Net:
-    return Net(
-        name,
-        tuple(Place(p, m) for p, m in places.items()),
-        tuple(
-            Transition(t, tuple(ins.items()), tuple(outs.items()))
-            for t, (ins, outs) in transitions.items()
-        ),
-    )
-
-
-def mutex() -> Net:
-    return _net(
-        "mutex",
-        {"idle1": 1, "cs1": 0, "idle2": 1, "cs2": 0, "lock": 1},
-        {
-            "enter1": ({"idle1": 1, "lock": 1}, {"cs1": 1}),
-            "exit1": ({"cs1": 1}, {"idle1": 1, "lock": 1}),
-            "enter2": ({"idle2": 1, "lock": 1}, {"cs2": 1}),
-            "exit2": ({"cs2": 1}, {"idle2": 1, "lock": 1}),
-        },
-    )
 
 
 def producer_consumer(capacity: int = 2) -> Net:
     """A producer and a consumer around a buffer of ``capacity`` slots (``free`` counts them)."""
-    return _net(
+    return make_net(
         "prodcons",
         {"ready": 1, "made": 0, "buffer": 0, "free": capacity, "want": 1, "got": 0},
         {
@@ -62,7 +37,7 @@ def producer_consumer(capacity: int = 2) -> Net:
 
 
 def pump() -> Net:
-    return _net("pump", {"a": 1, "b": 0}, {"t": ({"a": 1}, {"a": 1, "b": 1})})
+    return make_net("pump", {"a": 1, "b": 0}, {"t": ({"a": 1}, {"a": 1, "b": 1})})
 
 
 def _supports(net: Net, kind: str) -> set[tuple[str, ...]]:
@@ -99,7 +74,7 @@ def test_producer_consumer_bounds_the_buffer_by_its_capacity() -> None:
 
 def test_weights_and_gcd_normalisation() -> None:
     # Two tokens of a make one of b: 1*a + 2*b is invariant; the row is gcd-normalised.
-    net = _net("w", {"a": 4, "b": 0}, {"t": ({"a": 2}, {"b": 1}), "u": ({"b": 1}, {"a": 2})})
+    net = make_net("w", {"a": 4, "b": 0}, {"t": ({"a": 2}, {"b": 1}), "u": ({"b": 1}, {"a": 2})})
     p = p_invariants(net)
     assert [inv.weights for inv in p.invariants] == [(1, 2)]
     assert invariant_bounds(net, p) == {"a": 4, "b": 2}
@@ -115,7 +90,7 @@ def test_pump_has_no_p_invariant_on_the_pumped_place() -> None:
 
 def test_several_minimal_supports_per_column() -> None:
     # Three ways from s to e: each path is its own minimal P-invariant support.
-    net = _net(
+    net = make_net(
         "diamond",
         {"s": 1, "x": 0, "y": 0, "z": 0, "e": 0},
         {
@@ -138,7 +113,7 @@ def test_row_limit_says_incomplete_and_keeps_only_genuine_invariants() -> None:
     for i in range(k):
         transitions[f"go{i}"] = ({f"a{i}": 1, "hub": 1}, {f"b{i}": 1})
         transitions[f"back{i}"] = ({f"b{i}": 1}, {f"a{i}": 1, "hub": 1})
-    net = _net("hub", places, transitions)
+    net = make_net("hub", places, transitions)
     full = p_invariants(net)
     assert full.complete
     limited = p_invariants(net, max_rows=3)

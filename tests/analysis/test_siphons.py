@@ -18,41 +18,16 @@ from analysis.siphons import (
     minimal_siphons,
     siphon_trap_check,
 )
-from coral_lang.net import Net, Place, Transition
+from coral_lang.net import Net
+from tests.analysis.nets import Arcs, make_net, mutex
 from tests.analysis.reference import explore_reference
 from tests.analysis.strategies import small_nets
 from tests.conftest import CONFORMANCE
 
-Arcs = dict[str, int]
-
-
-def _net(name: str, places: dict[str, int], transitions: dict[str, tuple[Arcs, Arcs]]) -> Net:
-    return Net(
-        name,
-        tuple(Place(p, m) for p, m in places.items()),
-        tuple(
-            Transition(t, tuple(ins.items()), tuple(outs.items()))
-            for t, (ins, outs) in transitions.items()
-        ),
-    )
-
-
-def mutex() -> Net:
-    return _net(
-        "mutex",
-        {"idle1": 1, "cs1": 0, "idle2": 1, "cs2": 0, "lock": 1},
-        {
-            "enter1": ({"idle1": 1, "lock": 1}, {"cs1": 1}),
-            "exit1": ({"cs1": 1}, {"idle1": 1, "lock": 1}),
-            "enter2": ({"idle2": 1, "lock": 1}, {"cs2": 1}),
-            "exit2": ({"cs2": 1}, {"idle2": 1, "lock": 1}),
-        },
-    )
-
 
 def two_locks() -> Net:
     """Two processes take two locks in opposite orders: the classic deadlock."""
-    return _net(
+    return make_net(
         "two_locks",
         {"i1": 1, "h1": 0, "i2": 1, "h2": 0, "a": 1, "b": 1},
         {
@@ -106,7 +81,9 @@ def test_two_locks_fails_the_property_on_the_deadlock_siphon() -> None:
 
 
 def test_free_choice_cycle_is_proven_live() -> None:
-    net = _net("cycle", {"a": 1, "b": 0}, {"t": ({"a": 1}, {"b": 1}), "u": ({"b": 1}, {"a": 1})})
+    net = make_net(
+        "cycle", {"a": 1, "b": 0}, {"t": ({"a": 1}, {"b": 1}), "u": ({"b": 1}, {"a": 1})}
+    )
     check = siphon_trap_check(net)
     assert check.holds and check.proves_live and check.proves_deadlock_free
     assert "Commoner" in check.scope
@@ -114,7 +91,7 @@ def test_free_choice_cycle_is_proven_live() -> None:
 
 def test_weighted_net_is_only_a_partial_argument() -> None:
     # {a} is a siphon and a marked trap, yet t needs two tokens and is dead at once.
-    net = _net("weighted", {"a": 1}, {"t": ({"a": 2}, {"a": 2})})
+    net = make_net("weighted", {"a": 1}, {"t": ({"a": 2}, {"a": 2})})
     check = siphon_trap_check(net)
     assert check.holds is True
     assert not check.proves_deadlock_free and "partial argument" in check.scope
@@ -128,7 +105,7 @@ def test_siphon_budget_says_incomplete() -> None:
         f"t{i}{j}": ({f"p{i}": 1, f"p{j}": 1}, {f"p{(i + 1) % n}": 1, f"p{(j + 1) % n}": 1})
         for i, j in itertools.combinations(range(n), 2)
     }
-    result = minimal_siphons(_net("dense", places, transitions), max_branches=5)
+    result = minimal_siphons(make_net("dense", places, transitions), max_branches=5)
     assert not result.complete and "partial sets" in result.reason
     assert "incomplete" in result.explain()
 

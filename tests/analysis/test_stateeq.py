@@ -29,47 +29,18 @@ from analysis.stateeq import (
     unexpected_deadlocks,
 )
 from analysis.structural import incidence
-from coral_lang.net import FinalMarking, Net, Place, Transition
+from coral_lang.net import FinalMarking, Net
+from tests.analysis.nets import make_net, mutex
 from tests.analysis.reference import explore_reference
 from tests.analysis.strategies import small_nets
 from tests.conftest import CONFORMANCE
 
-Arcs = dict[str, int]
 
-
-def _net(
-    name: str,
-    places: dict[str, int],
-    transitions: dict[str, tuple[Arcs, Arcs]],
-    finals: tuple[FinalMarking, ...] = (),
-) -> Net:
-    return Net(
-        name,
-        tuple(Place(p, m) for p, m in places.items()),
-        tuple(
-            Transition(t, tuple(ins.items()), tuple(outs.items()))
-            for t, (ins, outs) in transitions.items()
-        ),
-        finals=finals,
-    )
-
-
-def mutex() -> Net:
-    return _net(
-        "mutex",
-        {"idle1": 1, "cs1": 0, "idle2": 1, "cs2": 0, "lock": 1},
-        {
-            "enter1": ({"idle1": 1, "lock": 1}, {"cs1": 1}),
-            "exit1": ({"cs1": 1}, {"idle1": 1, "lock": 1}),
-            "enter2": ({"idle2": 1, "lock": 1}, {"cs2": 1}),
-            "exit2": ({"cs2": 1}, {"idle2": 1, "lock": 1}),
-        },
-    )
-
-
-def trap_net() -> Net:
+def trapmake_net() -> Net:
     """{p, q} is a trap marked initially; the equation alone lets it empty (x = (2, 1))."""
-    return _net("trap", {"p": 1, "q": 0}, {"t": ({"p": 1}, {"q": 1}), "u": ({"q": 2}, {"p": 1})})
+    return make_net(
+        "trap", {"p": 1, "q": 0}, {"t": ({"p": 1}, {"q": 1}), "u": ({"q": 2}, {"p": 1})}
+    )
 
 
 def test_mutual_exclusion_is_proven_by_the_state_equation() -> None:
@@ -96,7 +67,7 @@ def test_invariants_may_be_added_and_must_be_p_invariants() -> None:
 
 
 def test_trap_constraint_removes_a_spurious_solution() -> None:
-    net = trap_net()
+    net = trapmake_net()
     empty = BadMarkings(constraints=(PlaceConstraint((("p", 1), ("q", 1)), "<=", 0),))
     plain = check_unreachable(net, empty, use_traps=False)
     assert isinstance(plain, Candidate)
@@ -110,7 +81,7 @@ def test_trap_constraint_removes_a_spurious_solution() -> None:
 def test_a_candidate_is_not_a_counterexample() -> None:
     # t needs a token in p to fire and p is never marked: b stays empty, but the state
     # equation (which ignores firability) says b = x_t is fine.
-    net = _net("stuck", {"p": 0, "b": 0}, {"t": ({"p": 1}, {"p": 1, "b": 1})})
+    net = make_net("stuck", {"p": 0, "b": 0}, {"t": ({"p": 1}, {"p": 1, "b": 1})})
     result = check_unreachable(net, above_bound(["b"], 0))
     assert isinstance(result, Candidate) and not result.is_counterexample
     assert result.marking_dict()["b"] >= 1 and result.counts_dict()["t"] >= 1
@@ -121,7 +92,7 @@ def test_a_candidate_is_not_a_counterexample() -> None:
 
 def test_deadlock_except_the_declared_final_marking() -> None:
     finals = (FinalMarking((("c", 1),)),)
-    net = _net(
+    net = make_net(
         "line",
         {"a": 1, "b": 0, "c": 0},
         {"t": ({"a": 1}, {"b": 1}), "u": ({"b": 1}, {"c": 1})},
@@ -135,13 +106,13 @@ def test_deadlock_except_the_declared_final_marking() -> None:
 
 def test_weighted_arcs_count_in_the_deadlock_constraint() -> None:
     # One token in a, t needs two: dead at once, although a is marked.
-    net = _net("w", {"a": 1}, {"t": ({"a": 2}, {"a": 2})})
+    net = make_net("w", {"a": 1}, {"t": ({"a": 2}, {"a": 2})})
     result = check_unreachable(net, deadlocks())
     assert isinstance(result, Candidate) and result.marking == (1,)
 
 
 def test_a_transition_without_inputs_rules_out_deadlock() -> None:
-    net = _net("source", {"a": 0}, {"t": ({}, {"a": 1})})
+    net = make_net("source", {"a": 0}, {"t": ({}, {"a": 1})})
     assert isinstance(check_unreachable(net, deadlocks()), Proven)
 
 

@@ -12,41 +12,15 @@ from hypothesis import given, settings
 
 from analysis.coverability import coverability
 from analysis.structural import classify, incidence, structural_boundedness
-from coral_lang.net import Net, Place, Transition
+from coral_lang.net import Net
+from tests.analysis.nets import make_net, mutex
 from tests.analysis.reference import explore_reference
 from tests.analysis.strategies import small_nets
 from tests.conftest import CONFORMANCE
 
-Arcs = dict[str, int]
-
-
-def _net(name: str, places: dict[str, int], transitions: dict[str, tuple[Arcs, Arcs]]) -> Net:
-    return Net(
-        name,
-        tuple(Place(p, m) for p, m in places.items()),
-        tuple(
-            Transition(t, tuple(ins.items()), tuple(outs.items()))
-            for t, (ins, outs) in transitions.items()
-        ),
-    )
-
-
-def mutex() -> Net:
-    """Two processes, one lock."""
-    return _net(
-        "mutex",
-        {"idle1": 1, "cs1": 0, "idle2": 1, "cs2": 0, "lock": 1},
-        {
-            "enter1": ({"idle1": 1, "lock": 1}, {"cs1": 1}),
-            "exit1": ({"cs1": 1}, {"idle1": 1, "lock": 1}),
-            "enter2": ({"idle2": 1, "lock": 1}, {"cs2": 1}),
-            "exit2": ({"cs2": 1}, {"idle2": 1, "lock": 1}),
-        },
-    )
-
 
 def cycle(n: int) -> Net:
-    return _net(
+    return make_net(
         "cycle",
         {f"p{i}": 1 if i == 0 else 0 for i in range(n)},
         {f"t{i}": ({f"p{i}": 1}, {f"p{(i + 1) % n}": 1}) for i in range(n)},
@@ -54,11 +28,11 @@ def cycle(n: int) -> Net:
 
 
 def pump() -> Net:
-    return _net("pump", {"a": 1, "b": 0}, {"t": ({"a": 1}, {"a": 1, "b": 1})})
+    return make_net("pump", {"a": 1, "b": 0}, {"t": ({"a": 1}, {"a": 1, "b": 1})})
 
 
 def test_incidence_is_post_minus_pre_with_weights() -> None:
-    net = _net("w", {"a": 2, "b": 0}, {"t": ({"a": 2}, {"b": 3}), "u": ({"b": 1}, {"a": 1})})
+    net = make_net("w", {"a": 2, "b": 0}, {"t": ({"a": 2}, {"b": 3}), "u": ({"b": 1}, {"a": 1})})
     inc = incidence(net)
     assert inc.places == ("a", "b") and inc.transitions == ("t", "u")
     assert inc.pre.dtype == np.int64 and inc.post.dtype == np.int64
@@ -91,7 +65,7 @@ def test_mutex_is_not_free_choice() -> None:
 
 
 def test_extended_free_choice_but_not_free_choice() -> None:
-    net = _net(
+    net = make_net(
         "efc",
         {"a": 1, "b": 1, "c": 0, "d": 0},
         {"t": ({"a": 1, "b": 1}, {"c": 1}), "u": ({"a": 1, "b": 1}, {"d": 1})},
@@ -101,7 +75,7 @@ def test_extended_free_choice_but_not_free_choice() -> None:
 
 
 def test_weighted_net_is_in_no_graph_class_but_can_be_conservative() -> None:
-    net = _net("w", {"a": 2, "b": 0}, {"t": ({"a": 2}, {"b": 2}), "u": ({"b": 2}, {"a": 2})})
+    net = make_net("w", {"a": 2, "b": 0}, {"t": ({"a": 2}, {"b": 2}), "u": ({"b": 2}, {"a": 2})})
     kind = classify(net)
     assert not kind.ordinary and not kind.state_machine and not kind.marked_graph
     assert kind.conservative and kind.subconservative
