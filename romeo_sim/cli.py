@@ -1,19 +1,27 @@
-"""``romeo-sim``: run the simulated ROMEO offline (the network server comes later).
+"""``romeo-sim``: run the simulated ROMEO offline, or serve it on the wire protocol.
 
 ``romeo-sim mission --out DIR`` runs the paper's pool mission with the scripted driver,
 writes figures like the paper's 7-9 (PNG and SVG) and the run log (JSON and CSV) into
 DIR, and prints a summary. The exit code is 0 when the mission completed, 1 when it did
 not, 2 for a bad vehicle file or arguments.
+
+``romeo-sim serve --key-file FILE`` serves the vehicle to a controller (the CORAL engine)
+on TCP and UDP (`romeo_sim.server.VehicleServer`) until Ctrl-C or ``--duration``; it
+prints ``listening on HOST:PORT`` first. The exit code is 0 after a clean stop, 2 for a
+missing or bad key, a bad vehicle file or arguments, 1 if the address cannot be bound.
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
+import math
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from romeo_sim.config import VehicleConfigError, load_vehicle_config
+from romeo_sim.config import VehicleConfig, VehicleConfigError, load_vehicle_config
 
 __all__ = ["build_parser", "main"]
 
@@ -22,7 +30,10 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``romeo-sim``."""
     parser = argparse.ArgumentParser(
         prog="romeo-sim",
-        description="Simulated ROMEO ROV in a pool: run the paper's pool mission offline.",
+        description=(
+            "Simulated ROMEO ROV in a pool: run the paper's pool mission offline, or serve "
+            "the vehicle to a controller on the coral wire protocol."
+        ),
     )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     mission = commands.add_parser(
@@ -44,12 +55,164 @@ def build_parser() -> argparse.ArgumentParser:
         help="vehicle YAML overriding the bundled romeo_vehicle.yaml",
     )
     mission.add_argument("--no-plots", action="store_true", help="write only the run log")
+    _add_serve_parser(commands)
     return parser
+
+
+def _add_serve_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    serve = commands.add_parser(
+        "serve",
+        help="serve the simulated vehicle to a controller on the coral wire protocol",
+        description=(
+            "Serve the simulated ROMEO on the coral wire protocol (docs/protocol.md): TCP for "
+            "the handshake, commands and replies (one controller at a time; a reconnecting "
+            "controller resumes its mission), UDP telemetry at 2 Hz of vehicle time to the "
+            "port the controller announces. Prints 'listening on HOST:PORT' when ready. A "
+            "pre-shared key of at least 16 bytes is required."
+        ),
+    )
+    serve.add_argument(
+        "--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)"
+    )
+    serve.add_argument(
+        "--port", type=int, default=0, help="TCP port; 0 lets the system pick one (default 0)"
+    )
+    key = serve.add_mutually_exclusive_group()
+    key.add_argument(
+        "--key-file",
+        type=Path,
+        metavar="FILE",
+        help="file holding the pre-shared key as hex text (white space ignored)",
+    )
+    key.add_argument(
+        "--key-hex",
+        metavar="HEX",
+        help="the pre-shared key as hex on the command line (visible to other users: tests only)",
+    )
+    serve.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    serve.add_argument(
+        "--speed",
+        type=float,
+        default=1.0,
+        metavar="FACTOR",
+        help="vehicle clock rate as a multiple of real time (default 1.0)",
+    )
+    serve.add_argument(
+        "--vehicle",
+        type=Path,
+        default=None,
+        help="vehicle YAML overriding the bundled romeo_vehicle.yaml",
+    )
+    serve.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="stop after this many wall-clock seconds (default: run until Ctrl-C)",
+    )
+
+
+class _KeyProblem(ValueError):
+    """The pre-shared key is missing, unreadable or too short."""
+
+
+def _load_key(args: argparse.Namespace) -> bytes:
+    """The pre-shared key from ``--key-file`` or ``--key-hex``.
+
+    Raises:
+        _KeyProblem: no key given, unreadable file, not hex, or shorter than 16 bytes.
+    """
+    from runtime.protocol import MIN_KEY_SIZE
+
+    hint = (
+        f"give --key-file FILE or --key-hex HEX with at least {MIN_KEY_SIZE} bytes "
+        "(32 random bytes recommended: python -c 'import secrets; print(secrets.token_hex(32))')"
+    )
+    if args.key_file is not None:
+        try:
+            text = args.key_file.read_text(encoding="ascii")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise _KeyProblem(f"cannot read the key file {args.key_file}: {exc}") from None
+        source = f"the key file {args.key_file}"
+    elif args.key_hex is not None:
+        text, source = args.key_hex, "--key-hex"
+    else:
+        raise _KeyProblem(f"serve needs a pre-shared key: {hint}")
+    try:
+        key = bytes.fromhex("".join(text.split()))
+    except ValueError:
+        raise _KeyProblem(f"{source} is not hex: {hint}") from None
+    if len(key) < MIN_KEY_SIZE:
+        raise _KeyProblem(f"{source} holds {len(key)} bytes, too short: {hint}")
+    return key
+
+
+def _serve(args: argparse.Namespace) -> int:
+    try:
+        key = _load_key(args)
+    except _KeyProblem as exc:
+        print(f"romeo-sim: {exc}", file=sys.stderr)
+        return 2
+    if not math.isfinite(args.speed) or args.speed <= 0.0:
+        print(f"romeo-sim: --speed must be a positive number, got {args.speed}", file=sys.stderr)
+        return 2
+    if args.duration is not None and (not math.isfinite(args.duration) or args.duration < 0.0):
+        print(f"romeo-sim: --duration must be >= 0 seconds, got {args.duration}", file=sys.stderr)
+        return 2
+    if not 0 <= args.port <= 65535:
+        print(f"romeo-sim: --port must be in 0..65535, got {args.port}", file=sys.stderr)
+        return 2
+    try:
+        config = None if args.vehicle is None else load_vehicle_config(args.vehicle)
+    except VehicleConfigError as exc:
+        print(f"romeo-sim: {exc}", file=sys.stderr)
+        return 2
+    try:
+        return asyncio.run(_run_server(args, key, config))
+    except KeyboardInterrupt:
+        print("romeo-sim: stopped (Ctrl-C)", file=sys.stderr)
+        return 0
+
+
+async def _run_server(args: argparse.Namespace, key: bytes, config: VehicleConfig | None) -> int:
+    from romeo_sim.server import VehicleServer
+    from romeo_sim.vehicle import Vehicle
+
+    server = VehicleServer(
+        Vehicle(config, seed=args.seed),
+        key,
+        host=args.host,
+        port=args.port,
+        clock=time.monotonic,
+        speed=args.speed,
+    )
+    try:
+        host, port = await server.start()
+    except OSError as exc:
+        print(f"romeo-sim: cannot listen on {args.host}:{args.port}: {exc}", file=sys.stderr)
+        await server.stop()
+        return 1
+    print(f"listening on {host}:{port}", flush=True)
+    try:
+        if args.duration is None:
+            await asyncio.Event().wait()
+        else:
+            await asyncio.sleep(args.duration)
+    finally:
+        await server.stop()
+        print(
+            f"romeo-sim: stopped at vehicle time {server.vehicle.time:.1f} s; "
+            f"{server.stats.summary()}",
+            file=sys.stderr,
+        )
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     args = build_parser().parse_args(argv)
+    if args.command == "serve":
+        return _serve(args)
     # Imported here so that `romeo-sim --help` stays fast.
     from romeo_sim.plots import plot_run
     from romeo_sim.scenario import mission_targets, run_pool_mission

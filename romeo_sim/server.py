@@ -1,0 +1,506 @@
+"""The simulated ROMEO served on the coral wire protocol (``romeo-sim serve``).
+
+`VehicleServer` puts a `Vehicle` behind a TCP listener (handshake, commands, replies, reply
+acknowledgements, heartbeats) and sends its telemetry by UDP, exactly as
+``docs/protocol.md`` describes the vehicle's side. It owns no clock and no randomness of its
+own: the wall clock, the nonce source and the log are parameters, so tests can drive it.
+
+How it behaves:
+
+* One controller at a time. A new connection is taken as the controller only once
+  `StreamCodec.peer_verified` is True (its first session frame); then the previous
+  connection, if any, is closed and the new one's ``Hello`` resume request is applied.
+* Every command id runs once per mission (`ReplyLedger`); a repeat re-sends the replies
+  still unacknowledged for it. Replies are kept until a `ReplyAck` (or a resuming
+  ``Hello``'s ``last_reply_seq``) covers them, and re-sent after a resume.
+* The vehicle's command ids are the server's own, numbered 1, 2, 3... across missions, so a
+  new mission may reuse the wire ids of an old one without the vehicle mistaking them for
+  repeats.
+* A stepping task advances the vehicle by the wall-clock time elapsed times ``speed``;
+  every frame from the controller first brings the vehicle up to date, so a command is
+  stamped with the right vehicle time. Telemetry samples are taken every
+  ``1 / telemetry_hz`` seconds of *vehicle* time.
+* Rejected input is counted and logged; the connection and the vehicle go on.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from romeo_sim.vehicle import Reply as VehicleReply
+from romeo_sim.vehicle import Vehicle
+from runtime.protocol import (
+    MAX_DETAIL_BYTES,
+    MIN_KEY_SIZE,
+    NONCE_SIZE,
+    Command,
+    Heartbeat,
+    Hello,
+    HelloReply,
+    ProtocolError,
+    Rejected,
+    ReplyAck,
+    ReplyLedger,
+    Role,
+    StreamCodec,
+    StreamMessage,
+    Telemetry,
+    encode_datagram,
+)
+
+__all__ = ["ServerStats", "VehicleServer"]
+
+Clock = Callable[[], float]
+"""A monotonic clock in seconds (wall time in production, a fake one in tests)."""
+
+
+def _stderr(line: str) -> None:
+    print(f"romeo-sim: {line}", file=sys.stderr, flush=True)
+
+
+@dataclass
+class ServerStats:
+    """Counters of one server run, for the log and the tests.
+
+    Attributes:
+        connections: TCP connections accepted.
+        adopted: connections that became the controller (after their first session frame).
+        commands: commands carried out (each command id of a mission once).
+        repeats: commands received again with an id already carried out.
+        replies: replies issued (not counting re-sends).
+        resent: replies sent again (after a resume or a repeated command).
+        rejected: frames the codec rejected (bad tag, replay, malformed...), all connections.
+        datagrams: telemetry datagrams sent.
+    """
+
+    connections: int = 0
+    adopted: int = 0
+    commands: int = 0
+    repeats: int = 0
+    replies: int = 0
+    resent: int = 0
+    rejected: int = 0
+    datagrams: int = 0
+
+    def summary(self) -> str:
+        """One line for the log."""
+        return (
+            f"{self.connections} connections ({self.adopted} adopted), {self.commands} "
+            f"commands ({self.repeats} repeats), {self.replies} replies ({self.resent} re-sent), "
+            f"{self.datagrams} telemetry datagrams, {self.rejected} frames rejected"
+        )
+
+
+@dataclass(eq=False)
+class _Connection:
+    """One accepted TCP connection and its codec."""
+
+    codec: StreamCodec
+    writer: asyncio.StreamWriter
+    peer: str
+    peer_host: str
+    hello: Hello | None = None
+    announced_resume: bool = False
+    adopted: bool = False
+    last_sent: float = 0.0
+    telemetry_seq: int = 0
+    closed: bool = field(default=False)
+
+    def send(self, msg: StreamMessage, now: float) -> None:
+        if self.closed or self.writer.is_closing():
+            return
+        self.writer.write(self.codec.encode(msg))
+        self.last_sent = now
+
+    def close(self) -> None:
+        self.closed = True
+        if not self.writer.is_closing():
+            self.writer.close()
+
+
+class VehicleServer:
+    """A `Vehicle` served on the coral wire protocol: TCP for the stream, UDP for telemetry.
+
+    Args:
+        vehicle: the simulated vehicle; the server is the only thing that should drive it
+            while it runs.
+        psk: the pre-shared key, at least `MIN_KEY_SIZE` bytes.
+        host: address to listen on (TCP) and send telemetry from (UDP).
+        port: TCP port; 0 picks a free one (`start` returns it).
+        clock: monotonic wall clock in seconds; ``time.monotonic`` in production.
+        speed: vehicle seconds per wall second (1.0: real time; 50.0: fifty times faster).
+        telemetry_hz: telemetry samples per second of vehicle time.
+        tick: wall seconds between steps of the stepping task.
+        heartbeat_interval: wall seconds of silence towards the controller after which the
+            server sends a `Heartbeat`.
+        handshake_timeout: wall seconds a new connection may take to prove it is live (its
+            first session frame) before it is closed.
+        nonces: source of random bytes for the handshake nonces; ``os.urandom`` by default.
+        log: receives one line per notable event (rejections, connections); stderr by
+            default.
+
+    Raises:
+        ValueError: a key shorter than `MIN_KEY_SIZE`, or a speed, rate or interval that is
+            not a positive finite number.
+    """
+
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        psk: bytes,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        clock: Clock = time.monotonic,
+        speed: float = 1.0,
+        telemetry_hz: float = 2.0,
+        tick: float = 0.05,
+        heartbeat_interval: float = 1.0,
+        handshake_timeout: float = 10.0,
+        nonces: Callable[[int], bytes] = os.urandom,
+        log: Callable[[str], None] = _stderr,
+    ) -> None:
+        if not isinstance(psk, bytes | bytearray) or len(psk) < MIN_KEY_SIZE:
+            raise ValueError(
+                f"the pre-shared key must be at least {MIN_KEY_SIZE} bytes "
+                "(use 32 random bytes, e.g. secrets.token_hex(32))"
+            )
+        for name, value in (
+            ("speed", speed),
+            ("telemetry_hz", telemetry_hz),
+            ("tick", tick),
+            ("heartbeat_interval", heartbeat_interval),
+            ("handshake_timeout", handshake_timeout),
+        ):
+            if not math.isfinite(value) or value <= 0.0:
+                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+        self.vehicle = vehicle
+        self._psk = bytes(psk)
+        self._host = host
+        self._port = port
+        self._clock = clock
+        self.speed = float(speed)
+        self._telemetry_period = 1.0 / telemetry_hz
+        self._tick = tick
+        self._heartbeat_interval = heartbeat_interval
+        self._handshake_timeout = handshake_timeout
+        self._nonces = nonces
+        self._log = log
+        self.stats = ServerStats()
+        self.ledger: ReplyLedger | None = None
+        """The current mission's ledger; None until a controller's Hello is adopted."""
+        self._active: _Connection | None = None
+        self._connections: set[_Connection] = set()
+        self._handlers: set[asyncio.Task[None]] = set()
+        # Vehicle-side command id -> (the ledger it belongs to, the wire command id).
+        self._origin: dict[int, tuple[ReplyLedger, int]] = {}
+        self._next_vehicle_id = 1
+        self._server: asyncio.Server | None = None
+        self._udp: asyncio.DatagramTransport | None = None
+        self._stepper: asyncio.Task[None] | None = None
+        self._last_wall = 0.0
+        self._next_sample = vehicle.time
+        self._address: tuple[str, int] | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+
+    @property
+    def address(self) -> tuple[str, int] | None:
+        """The bound TCP (host, port) once started, else None."""
+        return self._address
+
+    @property
+    def silence_timeout(self) -> float:
+        """The vehicle's watchdog in wall seconds (reported in `HelloReply`).
+
+        The watchdog counts vehicle seconds; the controller counts wall seconds, so at
+        ``speed`` 50 a 30-s watchdog is 0.6 s for the controller.
+        """
+        return self.vehicle.config.watchdog_s / self.speed
+
+    @property
+    def controller(self) -> str | None:
+        """The address of the current controller connection, None if there is none."""
+        return None if self._active is None else self._active.peer
+
+    async def start(self) -> tuple[str, int]:
+        """Listen, open the telemetry socket and start stepping the vehicle.
+
+        Returns:
+            The bound TCP (host, port); with ``port=0``, the port the system picked.
+
+        Raises:
+            RuntimeError: the server was already started.
+            OSError: the address cannot be bound.
+        """
+        if self._server is not None:
+            raise RuntimeError("VehicleServer.start() called twice")
+        loop = asyncio.get_running_loop()
+        self._server = await asyncio.start_server(self._on_connect, self._host, self._port)
+        sock = self._server.sockets[0].getsockname()
+        self._address = (str(sock[0]), int(sock[1]))
+        udp, _ = await loop.create_datagram_endpoint(
+            asyncio.DatagramProtocol, local_addr=(self._host, 0)
+        )
+        self._udp = udp
+        self._last_wall = self._clock()
+        self._next_sample = self.vehicle.time
+        self._stepper = asyncio.create_task(self._step_loop(), name="romeo-sim stepper")
+        return self._address
+
+    async def stop(self) -> None:
+        """Close every connection, stop stepping, release the sockets. Safe to call twice."""
+        if self._stepper is not None:
+            self._stepper.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._stepper
+            self._stepper = None
+        if self._server is not None:
+            self._server.close()
+        for conn in list(self._connections):
+            conn.close()
+        for task in list(self._handlers):
+            task.cancel()
+        if self._handlers:
+            await asyncio.gather(*self._handlers, return_exceptions=True)
+        if self._server is not None:
+            with contextlib.suppress(OSError):
+                await self._server.wait_closed()
+            self._server = None
+        if self._udp is not None:
+            self._udp.close()
+            self._udp = None
+        self._active = None
+
+    async def __aenter__(self) -> VehicleServer:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    # ------------------------------------------------------------------ vehicle time
+
+    def catch_up(self) -> None:
+        """Advance the vehicle to the present (wall time elapsed x speed); send what fell due.
+
+        Telemetry samples are taken on the way, every ``1 / telemetry_hz`` vehicle seconds.
+        """
+        now = self._clock()
+        elapsed = max(0.0, now - self._last_wall)
+        self._last_wall = now
+        target = self.vehicle.time + elapsed * self.speed
+        replies: list[VehicleReply] = []
+        while self._next_sample <= target:
+            replies += self.vehicle.advance_to(max(self._next_sample, self.vehicle.time))
+            self._send_telemetry()
+            self._next_sample += self._telemetry_period
+        replies += self.vehicle.advance_to(target)
+        self._issue(replies)
+
+    async def _step_loop(self) -> None:
+        while True:
+            self.catch_up()
+            active = self._active
+            if active is not None and not active.closed:
+                now = self._clock()
+                if now - active.last_sent >= self._heartbeat_interval:
+                    active.send(Heartbeat(self.vehicle.time), now)
+            await asyncio.sleep(self._tick)
+
+    def _send_telemetry(self) -> None:
+        conn = self._active
+        if conn is None or conn.closed or conn.hello is None or self._udp is None:
+            return
+        port = conn.hello.telemetry_port
+        key = conn.codec.session_key
+        if port == 0 or key is None:
+            return
+        t = self.vehicle.telemetry()
+        conn.telemetry_seq += 1
+        try:
+            datagram = encode_datagram(
+                key, Telemetry(conn.telemetry_seq, t.time, t.x, t.y, t.z, t.psi, t.x_est, t.y_est)
+            )
+        except ProtocolError as exc:  # a non-finite state: a bug in the simulation
+            self._log(f"telemetry not sent: {exc}")
+            return
+        self._udp.sendto(datagram, (conn.peer_host, port))
+        self.stats.datagrams += 1
+
+    # ------------------------------------------------------------------ replies
+
+    def _issue(self, replies: list[VehicleReply]) -> None:
+        """Number the vehicle's replies in the mission's ledger and send them."""
+        for reply in replies:
+            origin = self._origin.get(reply.command_id)
+            if origin is None or origin[0] is not self.ledger:
+                continue  # the vehicle's own (watchdog) or an abandoned mission's command
+            ledger, wire_id = origin
+            wire = ledger.issue(wire_id, reply.kind, reply.time, _clip(reply.detail))
+            self.stats.replies += 1
+            self._send_to_controller(wire)
+
+    def _send_to_controller(self, msg: StreamMessage) -> None:
+        conn = self._active
+        if conn is not None and not conn.closed:
+            conn.send(msg, self._clock())
+
+    # ------------------------------------------------------------------ connections
+
+    async def _on_connect(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        if task is not None:
+            self._handlers.add(task)
+        peer = writer.get_extra_info("peername")
+        conn = _Connection(
+            StreamCodec(self._psk, Role.VEHICLE, self._nonces(NONCE_SIZE)),
+            writer,
+            f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer),
+            str(peer[0]) if isinstance(peer, tuple) else self._host,
+        )
+        self._connections.add(conn)
+        self.stats.connections += 1
+        self._log(f"connection from {conn.peer}")
+        try:
+            await self._serve(conn, reader)
+        except (ConnectionError, OSError) as exc:
+            self._log(f"connection {conn.peer}: {exc}")
+        finally:
+            conn.close()
+            self._connections.discard(conn)
+            if self._active is conn:
+                self._active = None
+                self._log(f"controller {conn.peer} disconnected; replies kept until resumed")
+            if task is not None:
+                self._handlers.discard(task)
+
+    async def _serve(self, conn: _Connection, reader: asyncio.StreamReader) -> None:
+        while not conn.closed:
+            if conn.adopted:
+                data = await reader.read(4096)
+            else:
+                try:
+                    data = await asyncio.wait_for(reader.read(4096), self._handshake_timeout)
+                except TimeoutError:
+                    self._log(f"connection {conn.peer}: no verified frame in time; closing")
+                    return
+            if not data:
+                return
+            self.catch_up()
+            for item in conn.codec.feed(data):
+                if conn.closed:
+                    return
+                if isinstance(item, Rejected):
+                    self.stats.rejected += 1
+                    self._log(f"rejected from {conn.peer}: {item.reason.value}: {item.detail}")
+                elif isinstance(item, Hello):
+                    self._on_hello(conn, item)
+                # The first session frame proves the connection live (even an authentic
+                # frame that fails later checks): only then is it the controller.
+                if not conn.adopted and conn.hello is not None and conn.codec.peer_verified:
+                    self._adopt(conn)
+                if conn.adopted and not isinstance(item, Rejected | Hello):
+                    self._on_session(conn, item)
+            with contextlib.suppress(ConnectionError):
+                await conn.writer.drain()
+
+    def _on_hello(self, conn: _Connection, hello: Hello) -> None:
+        received_at = self.vehicle.time
+        resumed = self._can_resume(hello)
+        last = self.ledger.last_reply_seq if resumed and self.ledger is not None else 0
+        conn.hello = hello
+        conn.announced_resume = resumed
+        conn.send(
+            HelloReply(
+                hello.nonce,
+                conn.codec.nonce,
+                received_at,
+                self.vehicle.time,
+                resumed,
+                last,
+                self.silence_timeout,
+            ),
+            self._clock(),
+        )
+
+    def _can_resume(self, hello: Hello) -> bool:
+        return (
+            hello.resume and self.ledger is not None and self.ledger.mission_id == hello.mission_id
+        )
+
+    def _adopt(self, conn: _Connection) -> None:
+        """Make a verified connection the controller and apply its Hello."""
+        hello = conn.hello
+        assert hello is not None
+        if self._can_resume(hello) != conn.announced_resume:
+            # Another controller changed the mission between this Hello and now.
+            self._log(f"connection {conn.peer}: mission changed during the handshake; closing")
+            conn.close()
+            return
+        old = self._active
+        if old is not None and old is not conn:
+            self._log(f"controller {old.peer} replaced by {conn.peer}")
+            old.close()
+        self._active = conn
+        conn.adopted = True
+        self.stats.adopted += 1
+        self.vehicle.heard_from_controller()
+        if conn.announced_resume:
+            assert self.ledger is not None
+            self.ledger.acknowledge(hello.last_reply_seq)
+            pending = self.ledger.unacknowledged(hello.last_reply_seq)
+            self._log(
+                f"controller {conn.peer} resumed mission {hello.mission_id}; "
+                f"re-sending {len(pending)} replies"
+            )
+            for reply in pending:
+                self.stats.resent += 1
+                conn.send(reply, self._clock())
+        else:
+            self.ledger = ReplyLedger(hello.mission_id)
+            self._origin.clear()
+            what = "could not resume" if hello.resume else "starts"
+            self._log(f"controller {conn.peer} {what} mission {hello.mission_id}")
+
+    def _on_session(self, conn: _Connection, msg: StreamMessage) -> None:
+        if conn is not self._active or self.ledger is None:
+            return
+        self.vehicle.heard_from_controller()
+        if isinstance(msg, Command):
+            self._on_command(conn, msg)
+        elif isinstance(msg, ReplyAck):
+            self.ledger.acknowledge(msg.reply_seq)
+        # Heartbeat: hearing from the controller is all it does.
+
+    def _on_command(self, conn: _Connection, cmd: Command) -> None:
+        ledger = self.ledger
+        assert ledger is not None
+        if not ledger.first_time(cmd.command_id):
+            self.stats.repeats += 1
+            for reply in ledger.replies_for(cmd.command_id):
+                self.stats.resent += 1
+                conn.send(reply, self._clock())
+            return
+        vehicle_id = self._next_vehicle_id
+        self._next_vehicle_id += 1
+        self._origin[vehicle_id] = (ledger, cmd.command_id)
+        self.stats.commands += 1
+        self._issue(self.vehicle.command(vehicle_id, cmd.name, cmd.params))
+        # Replies this command caused for other commands (a replaced task's queries).
+        self._issue(self.vehicle.advance(0.0))
+
+
+def _clip(detail: str) -> str:
+    """``detail`` cut to what a Reply frame carries (whole UTF-8 characters)."""
+    raw = detail.encode("utf-8")
+    if len(raw) <= MAX_DETAIL_BYTES:
+        return detail
+    return raw[: MAX_DETAIL_BYTES - 3].decode("utf-8", errors="ignore") + "..."
