@@ -12,6 +12,7 @@ from hypothesis import given, settings
 
 from analysis.coverability import coverability
 from coral_lang.net import Net
+from coral_lang.pnml import read_pnml
 from tests.analysis.nets import Arcs, make_net
 from tests.analysis.reference import explore_reference
 from tests.analysis.strategies import small_nets
@@ -203,8 +204,7 @@ def _param(model: dict[str, Any]) -> Any:
 def test_karp_miller_matches_the_mcc_state_space(model: dict[str, Any]) -> None:
     """All MCC models are bounded: the tree has one node per reachable marking, and its
     per-place maxima are the oracle's bounds."""
-    pnml = pytest.importorskip("coral_lang.pnml")
-    net: Net = pnml.read_pnml(Path(CONFORMANCE) / model["pnml"])
+    net: Net = read_pnml(Path(CONFORMANCE) / model["pnml"])
     result = coverability(net, time_limit=60)
     assert result.bounded is True and result.complete
     assert result.nodes == model["states"]

@@ -30,6 +30,7 @@ from analysis.stateeq import (
 )
 from analysis.structural import incidence
 from coral_lang.net import FinalMarking, Net
+from coral_lang.pnml import read_pnml
 from tests.analysis.nets import make_net, mutex
 from tests.analysis.reference import explore_reference
 from tests.analysis.strategies import small_nets
@@ -120,10 +121,10 @@ def test_timeout_gives_unknown() -> None:
     # An Unknown needs z3 to really run out of time: a 1 ms limit on a query that takes
     # it seconds (DoubleExponent-PT-003 deadlock), so the outcome does not depend on load.
     path = CONFORMANCE / "pnml" / "DoubleExponent-PT-003.pnml"
-    pnml = pytest.importorskip("coral_lang.pnml")
-    if not path.exists():
-        pytest.skip("conformance data not present")
-    net: Net = pnml.read_pnml(path)
+    assert path.exists(), (
+        "shared/conformance is missing: clone the repository with ../shared beside it"
+    )
+    net: Net = read_pnml(path)
     result = check_unreachable(net, deadlocks(), timeout_ms=1, use_traps=False)
     assert isinstance(result, Unknown) and "z3" in result.reason
     assert "inconclusive" in result.explain()
@@ -206,8 +207,7 @@ def _param(model: dict[str, Any]) -> Any:
     "model", [_param(m) for m in _oracle_models() if m.get("deadlock") is not None]
 )
 def test_deadlock_proofs_never_contradict_the_mcc_oracle(model: dict[str, Any]) -> None:
-    pnml = pytest.importorskip("coral_lang.pnml")
-    net: Net = pnml.read_pnml(Path(CONFORMANCE) / model["pnml"])
+    net: Net = read_pnml(Path(CONFORMANCE) / model["pnml"])
     result = check_unreachable(net, deadlocks(), timeout_ms=3_000, time_limit=10)
     if model["deadlock"]:
         assert not isinstance(result, Proven), result.explain()
@@ -225,10 +225,10 @@ def test_deadlock_proofs_never_contradict_the_mcc_oracle(model: dict[str, Any]) 
 def test_deadlock_freedom_is_proven_on_known_deadlock_free_models(name: str, method: str) -> None:
     """Regression: these proofs hold today; losing one means the encoding got weaker."""
     model = next((m for m in _oracle_models() if m["model"] == name), None)
-    if model is None:
-        pytest.skip("conformance data not present")
+    assert model is not None, (
+        "shared/conformance is missing: clone the repository with ../shared beside it"
+    )
     assert model["deadlock"] is False
-    pnml = pytest.importorskip("coral_lang.pnml")
-    net: Net = pnml.read_pnml(Path(CONFORMANCE) / model["pnml"])
+    net: Net = read_pnml(Path(CONFORMANCE) / model["pnml"])
     result = check_unreachable(net, deadlocks(), timeout_ms=10_000, time_limit=30)
     assert isinstance(result, Proven) and result.method == method

@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from analysis.coverability import coverability
 from analysis.structural import classify, incidence, structural_boundedness
 from coral_lang.net import Net
+from coral_lang.pnml import read_pnml
 from tests.analysis.nets import make_net, mutex
 from tests.analysis.reference import explore_reference
 from tests.analysis.strategies import small_nets
@@ -135,8 +136,7 @@ def _oracle_models() -> list[dict[str, Any]]:
 
 
 def _read(model: dict[str, Any]) -> Net:
-    pnml = pytest.importorskip("coral_lang.pnml")
-    net: Net = pnml.read_pnml(Path(CONFORMANCE) / model["pnml"])
+    net: Net = read_pnml(Path(CONFORMANCE) / model["pnml"])
     return net
 
 
