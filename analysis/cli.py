@@ -16,6 +16,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from analysis.lint import DEFAULT_LINK_RTT_S, LintOptions, lint
 from coral_lang.compiler import CompileResult
 from coral_lang.diagnostics import ProfileError, Severity, render_all
 from coral_lang.loading import load_net_file
@@ -102,6 +103,14 @@ def _add_profile_option(parser: argparse.ArgumentParser) -> None:
         metavar="YAML",
         help="vehicle profile to use instead of the bundled one of that name (repeatable)",
     )
+    parser.add_argument(
+        "--link-rtt",
+        type=float,
+        default=DEFAULT_LINK_RTT_S,
+        metavar="SECONDS",
+        help="worst round trip of the link to the vehicle, for the query time-out rule "
+        f"CORAL206 (default {DEFAULT_LINK_RTT_S:g})",
+    )
 
 
 def _positive_int(text: str) -> int:
@@ -130,13 +139,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         if result is None:
             status = max(status, EXIT_USAGE)
             continue
-        errors = [d for d in result.diagnostics if d.severity is Severity.ERROR]
+        findings = lint(result, LintOptions(link_rtt_s=args.link_rtt))
+        if findings:
+            print(render_all(findings, result.sources), file=sys.stderr)
+        errors = [d for d in (*result.diagnostics, *findings) if d.severity is Severity.ERROR]
         if errors or result.net is None:
             status = max(status, EXIT_ERRORS)
             if not args.quiet:
                 print(f"{file}: {len(errors)} error{'s' if len(errors) != 1 else ''}")
         elif not args.quiet:
-            print(f"{file}: ok, {result.net.summary()}, digest {result.net.digest()}")
+            warned = (
+                f", {len(findings)} warning{'s' if len(findings) != 1 else ''}" if findings else ""
+            )
+            print(f"{file}: ok{warned}, {result.net.summary()}, digest {result.net.digest()}")
     return status
 
 
@@ -183,6 +198,9 @@ def _verify_main(argv: list[str]) -> int:
     if result.net is None or result.errors:
         print(f"{args.file}: not verified: fix the errors above first", file=sys.stderr)
         return EXIT_ERRORS
+    findings = lint(result, LintOptions(link_rtt_s=args.link_rtt))
+    if findings:
+        print(render_all(findings, result.sources), file=sys.stderr)
     options = VerifyOptions(
         max_states=args.max_states,
         time_limit=args.time_limit,

@@ -1,0 +1,347 @@
+"""Lint: mistakes a mission can compile with, found from its text and its net alone.
+
+The compiler already refuses what cannot run (CORAL0xx, CORAL1xx). The rules here
+(CORAL2xx) flag what runs but is probably wrong: a place nothing ever marks, a query
+whose time-out the Internet link can eat, two transitions racing for one token with
+nothing to decide between them. Each rule has a stable code, a severity, and a page in
+``docs/rules.md`` (bad example, why it matters at sea, the fix).
+
+A finding is silenced on one line with a comment that gives the reason, on the line
+itself or the line above::
+
+    transition retry    # coral: allow CORAL207 -- either order is fine here
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from analysis.statespace import Markings, explore
+from coral_lang import ast
+from coral_lang.compiler import CompileResult
+from coral_lang.diagnostics import Diagnostic, Severity, Span
+from coral_lang.net import Net, PlaceKind, TransitionKind
+from coral_lang.profile import VehicleProfile
+
+DEFAULT_LINK_RTT_S = 14.0
+"""Worst round trip assumed for the link: the paper saw commands delayed about 7 s on
+the Internet, each way."""
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A lint rule: stable code, default severity, one-line summary."""
+
+    code: str
+    severity: Severity
+    summary: str
+
+
+RULES: dict[str, Rule] = {
+    rule.code: rule
+    for rule in (
+        Rule("CORAL201", Severity.WARNING, "no final marking declared"),
+        Rule("CORAL202", Severity.WARNING, "constant declared but never used"),
+        Rule("CORAL203", Severity.WARNING, "place declared but never used"),
+        Rule("CORAL204", Severity.WARNING, "place waited on but never marked"),
+        Rule("CORAL205", Severity.WARNING, "place marked but never consumed"),
+        Rule(
+            "CORAL206",
+            Severity.WARNING,
+            "query time-out shorter than link round trip plus duration",
+        ),
+        Rule("CORAL207", Severity.WARNING, "transitions in conflict with no priority between them"),
+        Rule(
+            "CORAL208",
+            Severity.WARNING,
+            "suppression comment without a reason or for an unknown rule",
+        ),
+    )
+}
+
+_ALLOW = re.compile(
+    r"#\s*coral:\s*allow\s+(?P<codes>[A-Z0-9_, ]+?)(?:\s*--\s*(?P<reason>.*\S))?\s*$"
+)
+
+
+@dataclass(frozen=True)
+class LintOptions:
+    """Settings of the lint rules.
+
+    Attributes:
+        link_rtt_s: Worst round trip of the link to the vehicle, seconds (CORAL206).
+        max_states: State budget for finding racing transitions (CORAL207); races
+            beyond it are not reported.
+        time_limit: Seconds for that search.
+    """
+
+    link_rtt_s: float = DEFAULT_LINK_RTT_S
+    max_states: int = 200_000
+    time_limit: float = 10.0
+
+
+def lint(result: CompileResult, options: LintOptions | None = None) -> list[Diagnostic]:
+    """The lint findings of a compiled mission, suppressions applied, in source order.
+
+    Returns an empty list for a mission that did not compile (its errors come first).
+    """
+    options = options or LintOptions()
+    if result.net is None:
+        return []
+    findings = [
+        *_no_final(result),
+        *_unused_constants(result),
+        *_place_usage(result.net),
+        *_short_time_outs(result.net, result.profile, options),
+        *_unprioritised_conflicts(result.net, options),
+    ]
+    kept, suppression_findings = _apply_suppressions(findings, result.sources)
+    return sorted([*kept, *suppression_findings], key=_order)
+
+
+def _order(d: Diagnostic) -> tuple[str, int, int, str]:
+    if d.span is None:
+        return ("", 0, 0, d.code)
+    return (d.span.file, d.span.line, d.span.col, d.code)
+
+
+def _finding(code: str, message: str, span: Span | None, *notes: str) -> Diagnostic:
+    return Diagnostic(RULES[code].severity, code, message, span, tuple(notes))
+
+
+# -- rules -------------------------------------------------------------------------------
+
+
+def _no_final(result: CompileResult) -> Iterator[Diagnostic]:
+    net = result.net
+    assert net is not None
+    if not net.finals and result.missions:
+        root = result.missions[0]
+        yield _finding(
+            "CORAL201",
+            f"mission '{net.name}' declares no final marking: analysis cannot tell a proper "
+            "end from a deadlock",
+            root.name_span,
+            "add 'final { PLACE }' for each way the mission may end",
+        )
+
+
+def _declarations(result: CompileResult) -> Iterator[ast.Declaration]:
+    for mission in result.missions:
+        yield from mission.declarations
+
+
+def _names_used(result: CompileResult) -> set[str]:
+    used: set[str] = set()
+
+    def value(v: object) -> None:
+        if isinstance(v, ast.Name):
+            used.add(v.name)
+
+    def tokens(refs: tuple[ast.TokenRef, ...] | None) -> None:
+        for ref in refs or ():
+            value(ref.weight)
+
+    for decl in _declarations(result):
+        if isinstance(decl, ast.Places):
+            for place in decl.places:
+                value(place.initial)
+                value(place.capacity)
+        elif isinstance(decl, ast.Final):
+            tokens(decl.tokens)
+        elif isinstance(decl, ast.AssertDecl):
+            tokens(decl.tokens)
+            value(decl.bound)
+        elif isinstance(decl, ast.TransitionDecl):
+            value(decl.priority)
+            tokens(decl.wait)
+            tokens(decl.signal)
+            if decl.action is not None:
+                for arg in decl.action.args:
+                    value(arg.value)
+                for reply in decl.action.replies:
+                    tokens(reply.targets)
+    return used
+
+
+def _unused_constants(result: CompileResult) -> Iterator[Diagnostic]:
+    used = _names_used(result)
+    for decl in _declarations(result):
+        if isinstance(decl, ast.Const) and decl.name not in used:
+            yield _finding(
+                "CORAL202",
+                f"constant '{decl.name}' is never used",
+                decl.span,
+                "remove it, or use it where its value is written out",
+            )
+
+
+def _place_usage(net: Net) -> Iterator[Diagnostic]:
+    consumed: set[str] = set()
+    produced: set[str] = set()
+    for tr in net.transitions:
+        consumed.update(p for p, _ in tr.inputs)
+        produced.update(p for p, _ in tr.outputs)
+    in_finals = {p for f in net.finals for p, _ in f.tokens}
+    in_asserts = {p for a in net.assertions for p, _ in a.places}
+    for place in net.places:
+        if place.kind is not PlaceKind.MISSION:
+            continue
+        name = place.name
+        marked = place.initial > 0 or name in produced
+        if name not in consumed and name not in produced and name not in in_finals | in_asserts:
+            if place.initial == 0:
+                yield _finding(
+                    "CORAL203",
+                    f"place '{name}' is declared but no transition, final "
+                    "marking or assertion uses it",
+                    place.span,
+                    "remove it, or wire it in",
+                )
+            continue
+        if name in consumed and not marked:
+            waiting = sorted({t.name for t in net.transitions if name in dict(t.inputs)})
+            yield _finding(
+                "CORAL204",
+                f"place '{name}' is waited on ({', '.join(waiting)}) but nothing ever marks "
+                "it: those transitions can never fire",
+                place.span,
+                "signal it from a transition or a reply, or give it initial tokens",
+            )
+        if marked and name not in consumed and name not in in_finals and net.finals:
+            # without any final marking CORAL201 already says what is missing
+            yield _finding(
+                "CORAL205",
+                f"place '{name}' is marked but nothing consumes it and no final marking "
+                "includes it: its tokens are left behind",
+                place.span,
+                "consume it, or include it in the final marking where the mission ends",
+            )
+
+
+def _short_time_outs(
+    net: Net, profile: VehicleProfile | None, options: LintOptions
+) -> Iterator[Diagnostic]:
+    durations = {c.name: c.duration_s for c in profile.commands} if profile else {}
+    for tr in net.transitions:
+        if tr.kind is not TransitionKind.COMMAND or tr.command is None:
+            continue
+        time_out = dict(tr.command.params).get("time_out")
+        if not isinstance(time_out, int | float):
+            continue
+        duration = durations.get(tr.command.name, 0.0)
+        needed = options.link_rtt_s + duration
+        if float(time_out) < needed:
+            yield _finding(
+                "CORAL206",
+                f"{tr.command.name} time-out {float(time_out):g} s is shorter than the link's "
+                f"worst round trip ({options.link_rtt_s:g} s) plus the command's nominal "
+                f"duration ({duration:g} s): a slow link makes it time out although the "
+                "vehicle did its job",
+                tr.span,
+                f"raise time_out to at least {needed:g} s",
+            )
+
+
+def _unprioritised_conflicts(net: Net, options: LintOptions) -> Iterator[Diagnostic]:
+    """Pairs of engine transitions (not vehicle replies) with equal priority that are both
+    enabled in some reachable marking while their shared input places cannot feed both:
+    the engine's choice between them then rests on source order alone."""
+    engine = [i for i, t in enumerate(net.transitions) if t.kind is not TransitionKind.REPLY]
+    pairs = []
+    for a_pos, a in enumerate(engine):
+        ta = net.transitions[a]
+        inputs_a = dict(ta.inputs)
+        for b in engine[a_pos + 1 :]:
+            tb = net.transitions[b]
+            shared = [(p, w, inputs_a[p]) for p, w in tb.inputs if p in inputs_a]
+            if shared and ta.priority == tb.priority:
+                pairs.append((a, b, shared))
+    if not pairs:
+        return
+    space = explore(net, max_states=options.max_states, time_limit=options.time_limit)
+    cn = net
+    for a, b, shared in pairs:
+        ta, tb = cn.transitions[a], cn.transitions[b]
+        a_cols = [(cn.place_index(p), w) for p, w in ta.inputs]
+        b_cols = [(cn.place_index(p), w) for p, w in tb.inputs]
+        short = [(cn.place_index(p), wa + wb) for p, wb, wa in shared]
+
+        def racing(
+            block: Markings,
+            needs: tuple[tuple[int, int], ...] = (*a_cols, *b_cols),
+            short: list[tuple[int, int]] = short,
+        ) -> npt.NDArray[np.bool_]:
+            hit = np.ones(len(block), dtype=bool)
+            for i, w in needs:
+                hit &= block[:, i] >= w
+            scarce = np.zeros(len(block), dtype=bool)
+            for i, w in short:
+                scarce |= block[:, i] < w
+            out: npt.NDArray[np.bool_] = hit & scarce
+            return out
+
+        state = space.find(racing)
+        if state is None:
+            continue
+        place = shared[0][0]
+        yield _finding(
+            "CORAL207",
+            f"transitions '{ta.name}' and '{tb.name}' can both fire on '{place}' "
+            f"(after {space.depth_of(state)} step(s)) and have the same priority: which one "
+            "fires depends on source order alone",
+            tb.span,
+            f"give one a priority ('transition {tb.name} priority 1'), or allow it here "
+            "with a reason if either order is intended",
+        )
+
+
+# -- suppressions ------------------------------------------------------------------------
+
+
+def _apply_suppressions(
+    findings: list[Diagnostic], sources: dict[str, str]
+) -> tuple[list[Diagnostic], list[Diagnostic]]:
+    allowed: dict[tuple[str, int], set[str]] = {}
+    problems: list[Diagnostic] = []
+    for file, text in sources.items():
+        for number, line in enumerate(text.splitlines(), start=1):
+            match = _ALLOW.search(line)
+            if match is None:
+                continue
+            col = match.start() + 1
+            span = Span(file, number, col, number, len(line) + 1)
+            codes = {c.strip() for c in match.group("codes").replace(",", " ").split()}
+            unknown = sorted(c for c in codes if c not in RULES)
+            if unknown:
+                problems.append(
+                    _finding(
+                        "CORAL208",
+                        f"unknown rule {', '.join(unknown)} in suppression",
+                        span,
+                        f"rules: {', '.join(RULES)}",
+                    )
+                )
+            if not match.group("reason"):
+                problems.append(
+                    _finding(
+                        "CORAL208",
+                        "suppression without a reason",
+                        span,
+                        "write '# coral: allow CODE -- why this is intended'",
+                    )
+                )
+                continue
+            for target in (number, number + 1):  # the line itself, or the one below
+                allowed.setdefault((file, target), set()).update(codes)
+    kept = [
+        d
+        for d in findings
+        if d.span is None or d.code not in allowed.get((d.span.file, d.span.line), set())
+    ]
+    return kept, problems
