@@ -20,11 +20,13 @@ MISSION := examples/pool_mission/pool_mission.coral
 demo: $(STAMP)
 	@mkdir -p out
 	$(BIN)/python -m coral_lang.demo $(MISSION)
-	$(BIN)/coral-check verify $(MISSION) -o out/pool_mission.verification.txt
+	$(BIN)/coral-check verify $(MISSION) -o out/pool_mission.verification.txt \
+		--certificate out/pool_mission.certificate.json
 	$(BIN)/coral-check verify $(MISSION) --format json -o out/pool_mission.verification.json
 	@cat out/pool_mission.verification.txt
 	$(BIN)/romeo-sim mission --out out/sim --seed 0
 	@echo "verification report: out/pool_mission.verification.txt (.json)"
+	@echo "pre-mission certificate: out/pool_mission.certificate.json"
 	@echo "simulated run, logs and plots: out/sim/ (mission.png, phase*.png, *.csv)"
 
 test: lint typecheck unit

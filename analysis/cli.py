@@ -92,6 +92,12 @@ def build_verify_parser() -> argparse.ArgumentParser:
         help="skip invariants, structural boundedness and siphons/traps",
     )
     parser.add_argument("--progress", action="store_true", help="show search progress on stderr")
+    parser.add_argument(
+        "--certificate",
+        metavar="FILE",
+        help="also write the pre-mission certificate (net digest, verdicts, date) here; "
+        "the runtime runs only nets whose certificate says every property was proven",
+    )
     return parser
 
 
@@ -178,6 +184,7 @@ def _load(file: str, profiles: list[VehicleProfile]) -> CompileResult | None:
 
 
 def _verify_main(argv: list[str]) -> int:
+    from analysis.certificate import make_certificate, write_certificate
     from analysis.progress import ProgressPrinter
     from analysis.verify import VerifyOptions, verify
 
@@ -213,6 +220,15 @@ def _verify_main(argv: list[str]) -> int:
         text = json.dumps(report.to_dict(), indent=2) + "\n"
     else:
         text = report.render_text(color=not args.output and sys.stdout.isatty()) + "\n"
+    if args.certificate:
+        try:
+            write_certificate(make_certificate(report, options), args.certificate)
+        except OSError as exc:
+            print(
+                f"coral-check: error: cannot write '{args.certificate}': {exc.strerror}",
+                file=sys.stderr,
+            )
+            return EXIT_USAGE
     if args.output:
         try:
             Path(args.output).write_text(text, encoding="utf-8")
