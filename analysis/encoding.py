@@ -332,6 +332,18 @@ def first_occurrences(keys: KeyArray) -> tuple[npt.NDArray[np.int64], npt.NDArra
     return np.sort(group_first), leader
 
 
+_NO_OWNER = np.iinfo(np.int32).max
+
+PROBE_WINDOW_BELOW = 8192
+"""Probe batches up to this size look at `_WINDOW` consecutive slots per round."""
+
+_WINDOW = np.arange(8, dtype=np.int64)
+
+
+def _arange(n: int) -> npt.NDArray[np.int64]:
+    return np.arange(n, dtype=np.int64)
+
+
 class KeyStore:
     """Packed markings in discovery order plus an open-addressing set of them.
 
@@ -347,6 +359,8 @@ class KeyStore:
         self._keys = np.zeros((capacity, n_words), dtype=np.uint64)
         self._log = max(4, (int(capacity / MAX_LOAD) - 1).bit_length())
         self._table = np.full((1 << self._log, n_words), EMPTY, dtype=np.uint64)
+        self._owner = np.zeros(0, dtype=np.int32)  # scratch for `add`, table-sized
+        self._empty = self._rows(np.full((1, n_words), EMPTY, dtype=np.uint64))[0]
 
     @classmethod
     def of(cls, keys: KeyArray) -> KeyStore:
@@ -365,33 +379,54 @@ class KeyStore:
         """Bytes held by the key array and the table (allocated, not just used)."""
         return int(self._keys.nbytes + self._table.nbytes)
 
-    def _slots(self, keys: KeyArray) -> npt.NDArray[np.int64]:
-        return (_hash(keys) >> np.uint64(64 - self._log)).astype(np.int64)
+    def _slots(self, keys: KeyArray, hashes: KeyArray | None = None) -> npt.NDArray[np.int64]:
+        if hashes is None:
+            hashes = _hash(keys)
+        return (hashes >> np.uint64(64 - self._log)).astype(np.int64)
 
-    def contains(self, cand: KeyArray) -> npt.NDArray[np.bool_]:
-        """Which candidate keys are stored."""
+    def _rows(self, keys: KeyArray) -> npt.NDArray[np.generic]:
+        """``keys`` (C-contiguous) as a 1-D array with one item per row: ``uint64``
+        for one word, else a ``void`` of the row's bytes (compared in one call)."""
+        if self.n_words == 1:
+            return keys.reshape(-1)
+        return keys.view(np.dtype((np.void, 8 * self.n_words))).reshape(-1)
+
+    def contains(self, cand: KeyArray, hashes: KeyArray | None = None) -> npt.NDArray[np.bool_]:
+        """Which candidate keys are stored (``hashes``: their `_hash`, if known)."""
         mask = (1 << self._log) - 1
-        table = self._table
-        slots = self._slots(cand)
+        table = self._rows(self._table)
+        empty = self._empty
+        rows = self._rows(np.ascontiguousarray(cand))
+        slots = self._slots(cand, hashes)
         found = np.zeros(cand.shape[0], dtype=bool)
         active = np.arange(cand.shape[0], dtype=np.int64)
         one = self.n_words == 1
-        flat_table = table[:, 0]
-        flat_cand = cand[:, 0]
         while active.size:
             s = slots[active]
-            if one:
-                content = flat_table[s]
-                equal = content == flat_cand[active]
-                empty = content == EMPTY
+            # ``take`` is several times faster than fancy indexing of rows. Small
+            # batches look at a window of slots per round: fewer numpy calls.
+            if active.size > PROBE_WINDOW_BELOW:
+                if one:
+                    content = table.take(s)
+                    equal = content == rows.take(active)
+                    stop = equal | (content == empty)
+                else:
+                    content2 = self._table.take(s, axis=0)
+                    equal = ~_rows_differ(content2, cand.take(active, axis=0))
+                    stop = equal | (content2[:, 0] == EMPTY)
+                step = 1
             else:
-                content2 = table[s]
-                equal = ~_rows_differ(content2, cand[active])
-                empty = content2[:, 0] == EMPTY
+                window = (s[:, None] + _WINDOW) & mask
+                content = table.take(window)
+                hits = content == rows.take(active)[:, None]
+                ends = hits | (content == empty)
+                stop = ends.any(axis=1)
+                equal = hits[_arange(stop.size), ends.argmax(axis=1)] & stop
+                step = _WINDOW.size
             found[active[equal]] = True
-            more = ~(equal | empty)
+            more = ~stop
             active = active[more]
-            slots[active] = (s[more] + 1) & mask
+            slots[active] = (s[more] + step) & mask
         return found
 
     def _place(self, keys: KeyArray) -> None:
@@ -402,28 +437,68 @@ class KeyStore:
         active = np.arange(keys.shape[0], dtype=np.int64)
         while active.size:
             s = slots[active]
-            free = table[s, 0] == EMPTY
+            free = table.take(s, axis=0)[:, 0] == EMPTY
+            sf, af = s[free], active[free]
             # Several claims on one free slot: the last write wins, the others probe on.
-            table[s[free]] = keys[active[free]]
+            table[sf] = keys.take(af, axis=0)
             won = np.zeros(active.size, dtype=bool)
-            won[free] = ~_rows_differ(table[s[free]], keys[active[free]])
+            won[free] = ~_rows_differ(table.take(sf, axis=0), keys.take(af, axis=0))
             active = active[~won]
             slots[active] = (s[~won] + 1) & mask
 
-    def _append(self, keys: KeyArray) -> None:
-        need = self.size + keys.shape[0]
+    def _grow_keys(self, need: int) -> None:
         if need > self._keys.shape[0]:
             grown = np.zeros((max(need, 2 * self._keys.shape[0]), self.n_words), np.uint64)
             grown[: self.size] = self._keys[: self.size]
             self._keys = grown
-        if need > MAX_LOAD * (1 << self._log):
-            while need > MAX_LOAD * (1 << self._log):
-                self._log += 1
-            self._table = np.full((1 << self._log, self.n_words), EMPTY, dtype=np.uint64)
-            self._place(self._keys[: self.size])
+
+    def _rebuild(self, load: float, need: int) -> None:
+        """Grow the table (re-placing the stored keys) until ``need`` keys fit at
+        most ``load`` full; nothing happens if they already do."""
+        if need <= load * (1 << self._log):
+            return
+        while need > load * (1 << self._log):
+            self._log += 1
+        self._table = np.full((1 << self._log, self.n_words), EMPTY, dtype=np.uint64)
+        self._owner = np.zeros(0, dtype=np.int32)
+        self._place(self._keys[: self.size])
+
+    def _append(self, keys: KeyArray) -> None:
+        need = self.size + keys.shape[0]
+        self._grow_keys(need)
+        self._rebuild(MAX_LOAD, need)
         self._place(keys)
         self._keys[self.size : need] = keys
         self.size = need
+
+    def _claim(self, keys: KeyArray, hashes: KeyArray) -> npt.NDArray[np.int64]:
+        """Place keys that are not in the table before the call, repeats allowed,
+        and return each key's slot (equal keys share one)."""
+        mask = (1 << self._log) - 1
+        table = self._table
+        one = self.n_words == 1
+        flat_table = table.reshape(-1)
+        flat_keys = keys.reshape(-1)
+        slots = self._slots(keys, hashes)
+        active = np.arange(keys.shape[0], dtype=np.int64)
+        while active.size:
+            s = slots[active]
+            if one:
+                mine = flat_keys.take(active)
+                free = flat_table.take(s) == EMPTY
+                # Several claims on one free slot: the last write wins, equal keys
+                # find their copy, the others probe on.
+                flat_table[s[free]] = mine[free]
+                done = flat_table.take(s) == mine
+            else:
+                mine2 = keys.take(active, axis=0)
+                free = table.take(s, axis=0)[:, 0] == EMPTY
+                table[s[free]] = mine2[free]
+                done = ~_rows_differ(table.take(s, axis=0), mine2)
+            more = ~done
+            active = active[more]
+            slots[active] = (s[more] + 1) & mask
+        return slots
 
     def add(self, cand: KeyArray, limit: int | None = None) -> Added:
         """Store the candidate keys not seen before; the batch may repeat keys.
@@ -436,16 +511,38 @@ class KeyStore:
             An `Added` record; the new states are numbered ``size_before, ...`` in
             the order of their first occurrence in ``cand``.
         """
-        known = self.contains(cand)
+        hashes = _hash(cand)
+        known = self.contains(cand, hashes)
         unknown = np.flatnonzero(~known)
-        first, leader = first_occurrences(cand[unknown])
-        first = unknown[first]
-        cut = limit is not None and first.size > limit
-        if limit is not None and cut:
-            first = first[:limit]
         start = self.size
-        self._append(cand[first])
-        return Added(known, unknown, unknown[leader], first, start, cut)
+        if (limit is not None and unknown.size > limit) or unknown.size >= _NO_OWNER:
+            first, leader = first_occurrences(cand[unknown])
+            first = unknown[first]
+            cut = limit is not None and first.size > limit
+            if limit is not None and cut:
+                first = first[:limit]
+            self._append(cand[first])
+            return Added(known, unknown, unknown[leader], first, start, cut)
+        # No budget cut possible: the table itself removes repeats. Every unknown key
+        # is placed (the table may fill to 3/4 for a moment), then the first
+        # occurrence of each slot is its smallest batch position.
+        self._rebuild(0.75, self.size + unknown.size)
+        slot = self._claim(cand.take(unknown, axis=0), hashes.take(unknown))
+        if self._owner.size != 1 << self._log:
+            self._owner = np.full(1 << self._log, _NO_OWNER, dtype=np.int32)
+        owner = self._owner
+        local = np.arange(unknown.size, dtype=np.int32)
+        np.minimum.at(owner, slot, local)
+        lead = owner.take(slot).astype(np.int64)
+        owner[slot] = _NO_OWNER
+        first_local = np.flatnonzero(lead == local)
+        first = unknown[first_local]
+        need = self.size + first.size
+        self._grow_keys(need)
+        self._keys[self.size : need] = cand.take(first, axis=0)
+        self.size = need
+        self._rebuild(MAX_LOAD, need)
+        return Added(known, unknown, unknown[lead], first, start, False)
 
 
 @dataclass(frozen=True)

@@ -202,6 +202,14 @@ class StateSpace:
         )
 
 
+def _nonzero(matrix: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """``np.nonzero`` of a C-contiguous 2-D matrix (same order), via the much faster
+    1-D path: rows and columns come from the flat positions."""
+    flat = np.flatnonzero(matrix)
+    rows = flat // matrix.shape[1]
+    return rows, flat - rows * matrix.shape[1]
+
+
 class _Stop(Exception):
     """Raised inside the loop to end exploration early with a reason."""
 
@@ -241,6 +249,7 @@ class _Explorer:
         self.inc_p = cn.inc_places[inc_t, inc_col]
         self.inc_amount = cn.inc_amounts[inc_t, inc_col]
         self._set_layout(Layout.initial_guess(cn))
+        self.widenings = np.zeros(cn.n_places, dtype=np.int64)  # per place
         self.store = KeyStore(self.layout.n_words)
         self.parents: list[npt.NDArray[np.integer]] = [np.zeros(1, dtype=self.index_type)]
         self.via: list[npt.NDArray[np.integer]] = [np.zeros(1, dtype=self.via_type)]
@@ -257,6 +266,12 @@ class _Explorer:
         self.layout = layout
         self.dtype = row_dtype(layout, cn)
         self.key_delta = layout.key_deltas(cn.delta)
+        self.key_pos = layout.key_deltas(np.maximum(cn.delta, 0))
+        self.key_neg = layout.key_deltas(np.maximum(-cn.delta, 0))
+        boundary = np.zeros(layout.n_words, dtype=np.uint64)
+        for p, width in enumerate(layout.bits):
+            boundary[layout.word[p]] |= np.uint64(1 << (int(layout.shift[p]) + width))
+        self.boundary = boundary
         self.col_delta = np.ascontiguousarray(cn.delta.T.astype(self.dtype))
         self.weights = [self._fit(g.weights)[:, :, None] for g in cn.groups]
         limits = layout.limits
@@ -332,10 +347,65 @@ class _Explorer:
             needed[p] = max(needed.get(p, 0), v)
         return needed
 
+    def successor_keys(
+        self,
+        cols: npt.NDArray[np.integer],
+        base: int,
+        edges: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
+    ) -> tuple[npt.NDArray[np.uint64] | None, dict[int, int]]:
+        """Keys of the successors along ``edges``, and the places whose bit field some
+        firing overflows (as `overflow`); keys are ``None`` when that is not empty.
+
+        When some count in the block is close to its field limit, the keys are
+        computed as ``(key - consumed) + produced``: the subtraction never borrows
+        across fields (the transition is enabled), so a field overflows exactly when
+        the addition carries into the bit above it, which ``sum ^ a ^ b`` shows for
+        all fields of all edges at once.
+        """
+        trans, src = edges
+        keys = self.store.keys.take(base + src, axis=0)
+        risky = cols.max(axis=1, initial=0) >= self.at_risk_from
+        if not risky.any():
+            keys += self.key_delta.take(trans, axis=0)
+            return keys, {}
+        keys -= self.key_neg.take(trans, axis=0)
+        produced = self.key_pos.take(trans, axis=0)
+        carries = keys + produced
+        keys, carries = carries, carries ^ keys
+        carries ^= produced
+        carries &= self.boundary
+        if not np.count_nonzero(carries):
+            return keys, {}
+        bad = np.flatnonzero(carries.any(axis=1))
+        t_bad, s_bad = trans[bad], src[bad]
+        gathered = self.cn.inc_places[t_bad]
+        reached = cols[np.maximum(gathered, 0), s_bad[:, None]].astype(np.int64)
+        reached += self.cn.inc_amounts[t_bad]
+        hit = (gathered >= 0) & (reached >= self.layout.limits[np.maximum(gathered, 0)])
+        needed: dict[int, int] = {}
+        for p, v in zip(gathered[hit].tolist(), reached[hit].tolist(), strict=True):
+            needed[p] = max(needed.get(p, 0), v)
+        if not needed:  # cannot happen (a carry means an overflow); stay exact anyway
+            return None, self.overflow(cols, self.enabled(cols), edges)
+        return None, needed
+
     def widen(self, needed: dict[int, int], blocks: list[npt.NDArray[np.integer]]) -> None:
         """Re-pack every stored key with wider fields for the ``needed`` places and
         convert the frontier ``blocks`` (in place) to the new row dtype."""
         layout = self.layout.widened(needed)
+        # Re-packing costs a pass over every stored key: widen, in the same pass, the
+        # other fields that were widened twice already and are half full again (counts
+        # that keep growing), if that costs at most one more key word. Only the packing
+        # changes, never a count.
+        for p in needed:
+            self.widenings[p] += 1
+        growing = (self.widenings >= 2) & (self.bounds >= self.layout.limits // 2)
+        growing &= 2 * np.asarray(self.layout.bits, dtype=np.int64) <= MAX_FIELD_BITS
+        extra = {p: int(self.bounds[p]) for p in np.flatnonzero(growing).tolist()}
+        if extra:
+            ahead = self.layout.widened({**extra, **needed})
+            if ahead.n_words <= layout.n_words + 1:
+                layout = ahead
         if max(layout.bits) > MAX_FIELD_BITS:
             p = max(needed, key=lambda q: needed[q])
             name = self.cn.net.places[p].name
@@ -361,16 +431,21 @@ class _Explorer:
         src: npt.NDArray[np.int64],
         trans: npt.NDArray[np.int64],
         out: list[npt.NDArray[np.integer]],
+        keys: npt.NDArray[np.uint64] | None = None,
     ) -> Added:
-        """Store the successors of edges ``(src, trans)``; new columns go to ``out``."""
-        keys = self.store.keys[base + src] + self.key_delta[trans]
+        """Store the successors of edges ``(src, trans)`` (their ``keys`` if already
+        computed); new columns go to ``out``."""
+        if keys is None:
+            keys = self.store.keys.take(base + src, axis=0)
+            keys += self.key_delta.take(trans, axis=0)
         limit = None if self.max_states is None else self.max_states - self.store.size
         added = self.store.add(keys, limit)
         first = added.first
         if first.size:
             self.parents.append((base + src[first]).astype(self.index_type))
             self.via.append(trans[first].astype(self.via_type))
-            new = cols[:, src[first]] + self.col_delta[:, trans[first]]
+            new = cols.take(src[first], axis=1)
+            new += self.col_delta.take(trans[first], axis=1)
             out.append(new)
             self.bounds = np.maximum(self.bounds, new.max(axis=1))
             self.max_marking = max(self.max_marking, int(new.sum(axis=0, dtype=np.int64).max()))
@@ -383,11 +458,14 @@ class _Explorer:
     ) -> npt.NDArray[np.integer]:
         """Expand the frontier block ``cols`` (states ``base ...``); returns ``cols`` in
         the current row dtype (it changes when fields widen)."""
+        keys = None
         while True:
             enabled = self.enabled(cols)
-            trans, src = np.nonzero(enabled)
-            edges = (trans.astype(np.int64, copy=False), src.astype(np.int64, copy=False))
-            needed = self.overflow(cols, enabled, edges)
+            edges = _nonzero(enabled)
+            if self.reducer is None:
+                keys, needed = self.successor_keys(cols, base, edges)
+            else:
+                needed = self.overflow(cols, enabled, edges)
             if not needed:
                 break
             blocks = [cols, *out]
@@ -400,10 +478,10 @@ class _Explorer:
         if self.reducer is None:
             trans, src = edges
             self.edges += src.size
-            self.insert(cols, base, src, trans, out)
+            self.insert(cols, base, src, trans, out, keys)
             return cols
         reduced = self.reducer.reduce(cols, enabled)
-        rtrans, rsrc = np.nonzero(reduced)
+        rtrans, rsrc = _nonzero(reduced)
         self.edges += rsrc.size
         added = self.insert(cols, base, rsrc, rtrans, out)
         if not self.reducer.needs_proviso or self.stopped:
@@ -420,7 +498,7 @@ class _Explorer:
         if redo.any():
             extra = enabled & ~reduced
             extra[:, ~redo] = False
-            etrans, esrc = np.nonzero(extra)
+            etrans, esrc = _nonzero(extra)
             self.edges += esrc.size
             self.insert(cols, base, esrc, etrans, out)
         return cols
