@@ -19,9 +19,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
-from analysis.statespace import Markings, explore
+from analysis.statespace import explore
 from coral_lang import ast
 from coral_lang.compiler import CompileResult
 from coral_lang.diagnostics import Diagnostic, Severity, Span
@@ -91,8 +90,8 @@ def lint(result: CompileResult, options: LintOptions | None = None) -> list[Diag
     Returns an empty list for a mission that did not compile (its errors come first).
     """
     options = options or LintOptions()
-    if result.net is None:
-        return []
+    if result.net is None or not result.missions:
+        return []  # nothing compiled, or a PNML import: the rules are about mission text
     findings = [
         *_no_final(result),
         *_unused_constants(result),
@@ -265,36 +264,32 @@ def _unprioritised_conflicts(net: Net, options: LintOptions) -> Iterator[Diagnos
     if not pairs:
         return
     space = explore(net, max_states=options.max_states, time_limit=options.time_limit)
-    cn = net
-    for a, b, shared in pairs:
-        ta, tb = cn.transitions[a], cn.transitions[b]
-        a_cols = [(cn.place_index(p), w) for p, w in ta.inputs]
-        b_cols = [(cn.place_index(p), w) for p, w in tb.inputs]
-        short = [(cn.place_index(p), wa + wb) for p, wb, wa in shared]
-
-        def racing(
-            block: Markings,
-            needs: tuple[tuple[int, int], ...] = (*a_cols, *b_cols),
-            short: list[tuple[int, int]] = short,
-        ) -> npt.NDArray[np.bool_]:
+    found: dict[int, int] = {}  # pair number -> first state where the two race
+    # One pass over the stored markings, all pairs per block: unpacking markings is the
+    # expensive part, so it must not be repeated per pair.
+    for first, block in space.iter_markings():
+        for number, (a, b, shared) in enumerate(pairs):
+            if number in found:
+                continue
             hit = np.ones(len(block), dtype=bool)
-            for i, w in needs:
-                hit &= block[:, i] >= w
+            for place, weight in (*net.transitions[a].inputs, *net.transitions[b].inputs):
+                hit &= block[:, net.place_index(place)] >= weight
             scarce = np.zeros(len(block), dtype=bool)
-            for i, w in short:
-                scarce |= block[:, i] < w
-            out: npt.NDArray[np.bool_] = hit & scarce
-            return out
-
-        state = space.find(racing)
-        if state is None:
-            continue
-        place = shared[0][0]
+            for place, weight_b, weight_a in shared:
+                scarce |= block[:, net.place_index(place)] < weight_a + weight_b
+            states = np.flatnonzero(hit & scarce)
+            if states.size:
+                found[number] = first + int(states[0])
+        if len(found) == len(pairs):
+            break
+    for number in sorted(found):
+        a, b, shared = pairs[number]
+        ta, tb = net.transitions[a], net.transitions[b]
         yield _finding(
             "CORAL207",
-            f"transitions '{ta.name}' and '{tb.name}' can both fire on '{place}' "
-            f"(after {space.depth_of(state)} step(s)) and have the same priority: which one "
-            "fires depends on source order alone",
+            f"transitions '{ta.name}' and '{tb.name}' can both fire on '{shared[0][0]}' "
+            f"(after {space.depth_of(found[number])} step(s)) and have the same priority: "
+            "which one fires depends on source order alone",
             tb.span,
             f"give one a priority ('transition {tb.name} priority 1'), or allow it here "
             "with a reason if either order is intended",

@@ -112,3 +112,11 @@ def test_cli_prints_warnings_and_keeps_exit_0(capsys: pytest.CaptureFixture[str]
     assert main([str(EXAMPLES / "faulty" / "dead_transition.coral")]) == 0
     captured = capsys.readouterr()
     assert "[CORAL204]" in captured.err and "2 warnings" in captured.out
+
+
+def test_pnml_imports_are_not_linted() -> None:
+    from coral_lang import load_net_file
+    from tests.conftest import CONFORMANCE
+
+    result = load_net_file(CONFORMANCE / "pnml" / "Philosophers-PT-000005.pnml")
+    assert result.net is not None and lint(result) == []
