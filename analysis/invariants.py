@@ -251,14 +251,7 @@ def p_invariants(
         An `InvariantBasis` of kind ``"P"``.
     """
     vectors, complete, reason = semiflows(incidence(net).rows(), max_rows, time_limit, clock)
-    names = net.place_names
-    return InvariantBasis(
-        kind="P",
-        names=names,
-        invariants=tuple(Invariant(v, names) for v in vectors),
-        complete=complete,
-        reason=reason,
-    )
+    return _basis("P", net.place_names, vectors, complete, reason)
 
 
 def t_invariants(
@@ -281,9 +274,18 @@ def t_invariants(
     matrix = incidence(net).rows()
     columns = [[row[t] for row in matrix] for t in range(len(net.transitions))]
     vectors, complete, reason = semiflows(columns, max_rows, time_limit, clock)
-    names = tuple(t.name for t in net.transitions)
+    return _basis("T", tuple(t.name for t in net.transitions), vectors, complete, reason)
+
+
+def _basis(
+    kind: Literal["P", "T"],
+    names: tuple[str, ...],
+    vectors: list[tuple[int, ...]],
+    complete: bool,
+    reason: str,
+) -> InvariantBasis:
     return InvariantBasis(
-        kind="T",
+        kind=kind,
         names=names,
         invariants=tuple(Invariant(v, names) for v in vectors),
         complete=complete,

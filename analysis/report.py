@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from coral_lang.diagnostics import Span
-from coral_lang.net import Net, TransitionKind
+from coral_lang.net import Net, TransitionKind, format_tokens
 
 REPORT_FORMAT_VERSION = 1
 
@@ -274,9 +274,7 @@ class Report:
 
 
 def _format_marking(marking: dict[str, int]) -> str:
-    if not marking:
-        return "the empty marking"
-    return "{ " + ", ".join(p if n == 1 else f"{p}*{n}" for p, n in marking.items()) + " }"
+    return format_tokens(marking.items()) if marking else "the empty marking"
 
 
 _COLOURS = {Verdict.PROVEN: "32", Verdict.VIOLATED: "31", Verdict.INCONCLUSIVE: "33"}

@@ -41,7 +41,7 @@ from analysis.report import (
 )
 from analysis.statespace import StateSpace, explore
 from coral_lang.diagnostics import Span
-from coral_lang.net import AssertKind, Net, PlaceKind
+from coral_lang.net import AssertKind, Net, PlaceKind, format_tokens
 
 Markings = npt.NDArray[np.int64]
 Predicate = Callable[[Markings], npt.NDArray[np.bool_]]
@@ -426,13 +426,14 @@ class _Checker:
 
         hit = self.space.find(is_final)
         if hit is not None:
+            reached = format_tokens(self.net.marking_dict(self.space.marking(hit)).items())
             return [
                 PropertyResult(
                     "final_reachable",
                     title,
                     Verdict.PROVEN,
                     self.method,
-                    f"{_marking_text(self.net.marking_dict(self.space.marking(hit)))} reached in "
+                    f"{reached} reached in "
                     f"{self.space.depth_of(hit)} step(s) (witness trace in the JSON report)",
                     self._witness(hit),
                 )
@@ -770,7 +771,3 @@ class _Checker:
         siphons = siphon_trap_check(net, time_limit=STRUCTURE_SECONDS)
         facts["siphons_traps"] = {"summary": siphons.explain()}
         return facts
-
-
-def _marking_text(marking: dict[str, int]) -> str:
-    return "{ " + ", ".join(p if n == 1 else f"{p}*{n}" for p, n in marking.items()) + " }"

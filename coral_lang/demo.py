@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 from coral_lang.compiler import compile_file
 from coral_lang.diagnostics import render_all
-from coral_lang.net import PlaceKind, TransitionKind
+from coral_lang.net import PlaceKind, TransitionKind, format_tokens
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -41,13 +41,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"    {transition.span.file}:{transition.span.line}  {transition.name}: "
             f"{transition.command.header()}"
         )
-    print(
-        "  final markings: "
-        + "; ".join(
-            "{ " + ", ".join(p if w == 1 else f"{p}*{w}" for p, w in f.tokens) + " }"
-            for f in net.finals
-        )
-    )
+    print("  final markings: " + "; ".join(format_tokens(f.tokens) for f in net.finals))
     return 0
 
 

@@ -138,10 +138,21 @@ class Assertion:
 
     def describe(self) -> str:
         """The assertion in the mission's own syntax."""
-        body = ", ".join(p if w == 1 else f"{p}*{w}" for p, w in self.places)
+        body = _token_list(self.places)
         if self.kind is AssertKind.BOUND:
             return f"assert bound {body} <= {self.bound}"
         return f"assert {self.kind.value} {{ {body} }}"
+
+
+def _token_list(tokens: Iterable[tuple[str, int]]) -> str:
+    return ", ".join(p if w == 1 else f"{p}*{w}" for p, w in tokens)
+
+
+def format_tokens(tokens: Iterable[tuple[str, int]]) -> str:
+    """Tokens in mission syntax, e.g. ``{ abort, log*2 }`` (``{ }`` when empty): how
+    markings, finals and assertions are shown to people everywhere in coral."""
+    body = _token_list(tokens)
+    return f"{{ {body} }}" if body else "{ }"
 
 
 class NetError(CoralError, ValueError):
