@@ -351,6 +351,11 @@ class _Parser:
                         ),
                     )
                 action = self.action()
+        if self.tok.kind is Kind.IDENT and self.tok.text == "priority":
+            raise self.error(
+                "'priority' is not a clause: it goes on the transition's line, "
+                f"'transition {name.text} priority N'"
+            )
         if self.tok.kind is Kind.IDENT and self.tok.text not in STATEMENT_KEYWORDS:
             clause_hint = did_you_mean(self.tok.text, ("wait", "action", "signal", "priority"))
             if clause_hint:

@@ -38,6 +38,10 @@ TABLE: list[tuple[str, str]] = [
         "4:14: unknown clause 'wiat' (did you mean 'wait'?) [CORAL001]",
     ),
     (
+        HEADER + PLACES + "transition t wait { a } signal { b }\n    priority 2\n",
+        "5:5: 'priority' is not a clause: it goes on the transition's line, 'transition t priority N' [CORAL001]",
+    ),
+    (
         HEADER + PLACES + "wait { a }\n",
         "4:1: 'wait' must belong to a transition; start one with 'transition NAME' [CORAL001]",
     ),

@@ -1,0 +1,492 @@
+"""The CORAL Engine: the paper's synchronous loop over a verified net.
+
+The engine owns the marking. It reacts to one input at a time (the start of the mission,
+or one reply from the vehicle): it updates the marking, then, while an engine transition
+(plain or command) is enabled, chooses one by the policy, fires it and collects the
+commands it emits. Reply transitions are the vehicle's: they fire only when the vehicle's
+reply for that command arrives.
+
+A step costs what it touches, not the size of the net: after a firing only the
+transitions that consume from a place whose count changed are re-checked, and the
+enabled ones wait in a heap ordered by the policy (priority, then source order).
+
+The engine is pure: no sockets, no clock, no log. Times are passed in; the controller
+(`runtime.controller`) does the I/O and writes the event log, and `snapshot` /
+`Engine.restore` carry the state across a crash.
+
+Only a verified net runs: the constructor takes the `CertificateCheck` that
+`analysis.certificate.check_certificate` returns for this very net, and refuses any other.
+"""
+
+from __future__ import annotations
+
+import enum
+import heapq
+import random
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from analysis.certificate import CertificateCheck
+from coral_lang.diagnostics import CoralError
+from coral_lang.net import Command, Net, TransitionKind
+from coral_lang.profile import TIME_OUT
+
+__all__ = [
+    "CommandStatus",
+    "Engine",
+    "EngineError",
+    "Firing",
+    "Outcome",
+    "Policy",
+    "SentCommand",
+    "StepResult",
+    "UnexpectedReply",
+]
+
+DEFAULT_MAX_FIRINGS_PER_STEP = 1_000_000
+
+
+class EngineError(CoralError, RuntimeError):
+    """The engine cannot go on: no passing certificate, a bad snapshot, a livelock."""
+
+
+class Policy(enum.Enum):
+    """How the engine chooses among enabled transitions.
+
+    ``PRIORITY``: the highest ``priority`` first, then the earliest in source order (the
+    order of the net's transitions): deterministic, what runs on the vehicle.
+    ``RANDOM``: uniformly among the enabled transitions of the highest priority, from a
+    seeded generator: for tests that must see every order analysis allowed.
+    """
+
+    PRIORITY = "priority"
+    RANDOM = "random"
+
+
+class Outcome(enum.Enum):
+    """Where the mission stands after a step."""
+
+    RUNNING = "running"  # commands in flight: waiting for the vehicle
+    FINAL = "final"  # nothing enabled, nothing in flight, a declared final marking
+    DEADLOCK = "deadlock"  # nothing enabled, nothing in flight, not a final marking
+
+
+@dataclass(frozen=True)
+class SentCommand:
+    """A command the engine wants sent: ``command_id`` is unique within the mission."""
+
+    command_id: int
+    transition: str
+    command: Command
+    sent_at: float
+    timeout_at: float | None
+
+
+@dataclass(frozen=True)
+class Firing:
+    """One transition fired, with the time of the step that fired it."""
+
+    transition: str
+    time: float
+    command_id: int | None = None  # the command sent, or the one answered (reply)
+
+
+@dataclass(frozen=True)
+class UnexpectedReply:
+    """A reply the net cannot take: unknown command id, command already answered, or a
+    reply kind the net has no transition for. The marking is left as it was."""
+
+    command_id: int
+    kind: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one step did: the firings in order, the commands to send, and the outcome."""
+
+    firings: tuple[Firing, ...]
+    commands: tuple[SentCommand, ...]
+    outcome: Outcome
+    unexpected: UnexpectedReply | None = None
+
+
+@dataclass(frozen=True)
+class CommandStatus:
+    """A command in flight, for the operator's status display."""
+
+    command_id: int
+    transition: str
+    header: str
+    sent_at: float
+    awaiting: tuple[str, ...]
+    timeout_at: float | None
+
+    def line(self, now: float) -> str:
+        """E.g. ``#7 check_depth ROMEO(DEPTH?, ...) sent 3.2 s ago, awaiting done|timeout,
+        time-out in 56.8 s``."""
+        text = (
+            f"#{self.command_id} {self.transition} {self.header} sent "
+            f"{max(0.0, now - self.sent_at):.1f} s ago, awaiting {'|'.join(self.awaiting)}"
+        )
+        if self.timeout_at is not None:
+            left = self.timeout_at - now
+            text += (
+                f", time-out in {left:.1f} s"
+                if left >= 0
+                else f", time-out passed {-left:.1f} s ago (reply not yet here)"
+            )
+        return text
+
+
+@dataclass
+class _InFlight:
+    command_id: int
+    transition: int
+    sent_at: float
+    timeout_at: float | None
+
+
+@dataclass
+class _Compiled:
+    """Index arrays of the net, built once."""
+
+    names: list[str]
+    inputs: list[tuple[tuple[int, int], ...]]
+    outputs: list[tuple[tuple[int, int], ...]]
+    changes: list[tuple[int, ...]]  # places whose count a firing changes
+    engine_consumers: list[tuple[int, ...]]  # per place: engine transitions reading it
+    is_engine: list[bool]
+    priority: list[int]
+    reply_of: dict[tuple[int, str], int] = field(default_factory=dict)
+
+
+def _compile(net: Net) -> _Compiled:
+    pindex = {p.name: i for i, p in enumerate(net.places)}
+    tindex = {t.name: i for i, t in enumerate(net.transitions)}
+    consumers: list[list[int]] = [[] for _ in net.places]
+    inputs, outputs, changes, is_engine, priority = [], [], [], [], []
+    reply_of: dict[tuple[int, str], int] = {}
+    for i, tr in enumerate(net.transitions):
+        ins = tuple((pindex[p], w) for p, w in tr.inputs)
+        outs = tuple((pindex[p], w) for p, w in tr.outputs)
+        delta: dict[int, int] = {}
+        for p, w in ins:
+            delta[p] = delta.get(p, 0) - w
+        for p, w in outs:
+            delta[p] = delta.get(p, 0) + w
+        inputs.append(ins)
+        outputs.append(outs)
+        changes.append(tuple(p for p, d in delta.items() if d))
+        engine = tr.kind is not TransitionKind.REPLY
+        is_engine.append(engine)
+        priority.append(tr.priority)
+        if engine:
+            for p, _ in ins:
+                consumers[p].append(i)
+        elif tr.reply_to is not None and tr.reply is not None:
+            reply_of[(tindex[tr.reply_to], tr.reply)] = i
+    return _Compiled(
+        names=[t.name for t in net.transitions],
+        inputs=inputs,
+        outputs=outputs,
+        changes=changes,
+        engine_consumers=[tuple(sorted(set(c))) for c in consumers],
+        is_engine=is_engine,
+        priority=priority,
+        reply_of=reply_of,
+    )
+
+
+class Engine:
+    """Runs one verified net: `start`, then `on_reply` for each reply from the vehicle.
+
+    Args:
+        net: the compiled mission.
+        approval: what `check_certificate(net, path)` returned for this net.
+        policy: how to choose among enabled transitions.
+        seed: the seed of the generator `Policy.RANDOM` uses.
+        max_firings_per_step: a bound on the firings of one step, so a cycle of engine
+            transitions that never waits for the vehicle is reported, not run forever.
+
+    Raises:
+        EngineError: the approval is for another net (its digest differs).
+    """
+
+    def __init__(
+        self,
+        net: Net,
+        approval: CertificateCheck,
+        *,
+        policy: Policy = Policy.PRIORITY,
+        seed: int = 0,
+        max_firings_per_step: int = DEFAULT_MAX_FIRINGS_PER_STEP,
+    ) -> None:
+        if not isinstance(approval, CertificateCheck):
+            raise EngineError(
+                "the engine runs only verified nets: pass the result of "
+                "analysis.certificate.check_certificate(net, CERTIFICATE)"
+            )
+        digest = net.digest()
+        if approval.net_digest != digest:
+            raise EngineError(
+                f"certificate {approval.path} was issued for net {approval.net_digest}, not "
+                f"for this one ({digest}); run 'coral-check verify MISSION --certificate FILE' "
+                "on the mission as it is now"
+            )
+        self.net = net
+        self.digest = digest
+        self.policy = policy
+        self._random = random.Random(seed)
+        self._max_firings = max_firings_per_step
+        self._c = _compile(net)
+        self.marking: list[int] = list(net.initial_marking())
+        self._finals = {tuple(m) for m in net.final_markings()}
+        self._in_flight: dict[int, _InFlight] = {}
+        self._next_command_id = 1
+        self.firings = 0
+        self.checks = 0
+        """Enabling checks done so far: the engine's unit of work (tests, benchmarks)."""
+        self.started = False
+        self._heap: list[tuple[int, int]] = []
+        self._queued = [False] * len(net.transitions)
+        for i in range(len(net.transitions)):
+            self._consider(i)
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def next_command_id(self) -> int:
+        """The id the next command will get."""
+        return self._next_command_id
+
+    def in_flight(self) -> list[SentCommand]:
+        """Commands sent and not yet answered, oldest first."""
+        return [self._sent(f) for f in sorted(self._in_flight.values(), key=_by_id)]
+
+    def status(self) -> list[CommandStatus]:
+        """One status entry per command in flight, oldest first."""
+        result = []
+        for flight in sorted(self._in_flight.values(), key=_by_id):
+            tr = self.net.transitions[flight.transition]
+            assert tr.command is not None
+            result.append(
+                CommandStatus(
+                    command_id=flight.command_id,
+                    transition=tr.name,
+                    header=tr.command.header(),
+                    sent_at=flight.sent_at,
+                    awaiting=tr.command.replies,
+                    timeout_at=flight.timeout_at,
+                )
+            )
+        return result
+
+    def marking_dict(self) -> dict[str, int]:
+        """The marked places, ``{name: tokens}``."""
+        return self.net.marking_dict(self.marking)
+
+    def outcome(self) -> Outcome:
+        """Running while anything is enabled or in flight; then final or deadlock."""
+        if self._in_flight or self._peek() is not None:
+            return Outcome.RUNNING
+        return Outcome.FINAL if tuple(self.marking) in self._finals else Outcome.DEADLOCK
+
+    def snapshot(self) -> dict[str, object]:
+        """The engine's state as JSON-ready data; `restore` rebuilds the engine from it."""
+        return {
+            "net_digest": self.digest,
+            "marking": self.marking_dict(),
+            "in_flight": [
+                [f.command_id, self._c.names[f.transition], f.sent_at, f.timeout_at]
+                for f in sorted(self._in_flight.values(), key=_by_id)
+            ],
+            "next_command_id": self._next_command_id,
+            "firings": self.firings,
+            "started": self.started,
+        }
+
+    @classmethod
+    def restore(
+        cls,
+        net: Net,
+        approval: CertificateCheck,
+        state: Mapping[str, object],
+        *,
+        policy: Policy = Policy.PRIORITY,
+        seed: int = 0,
+    ) -> Engine:
+        """The engine as `snapshot` left it (after a crash, from the event log).
+
+        Raises:
+            EngineError: the snapshot is of another net, or does not fit this one.
+        """
+        engine = cls(net, approval, policy=policy, seed=seed)
+        if state.get("net_digest") != engine.digest:
+            raise EngineError(
+                f"the saved state is of net {state.get('net_digest')}, not of this one "
+                f"({engine.digest}): resume with the mission that was running"
+            )
+        try:
+            marking = state["marking"]
+            assert isinstance(marking, Mapping)
+            engine.marking = list(net.marking_from({str(k): int(v) for k, v in marking.items()}))
+            flights = state["in_flight"]
+            assert isinstance(flights, list)
+            for command_id, name, sent_at, timeout_at in flights:
+                index = net.transition_index(str(name))
+                engine._in_flight[int(command_id)] = _InFlight(
+                    int(command_id),
+                    index,
+                    float(sent_at),
+                    None if timeout_at is None else float(timeout_at),
+                )
+            next_id = state["next_command_id"]
+            firings = state["firings"]
+            assert isinstance(next_id, int) and isinstance(firings, int)
+            engine._next_command_id = next_id
+            engine.firings = firings
+            engine.started = bool(state.get("started", True))
+        except (KeyError, AssertionError, TypeError, ValueError) as exc:
+            raise EngineError(f"the saved engine state is damaged ({exc!r})") from None
+        engine._heap.clear()
+        engine._queued = [False] * len(net.transitions)
+        for i in range(len(net.transitions)):
+            engine._consider(i)
+        return engine
+
+    # ------------------------------------------------------------------ steps
+
+    def start(self, now: float) -> StepResult:
+        """Run the engine transitions enabled in the initial marking to quiescence.
+
+        Raises:
+            EngineError: called twice.
+        """
+        if self.started:
+            raise EngineError("the mission was already started")
+        self.started = True
+        return self._run(now, [])
+
+    def on_reply(self, command_id: int, kind: str, now: float) -> StepResult:
+        """The vehicle answered ``command_id`` with ``kind``: fire that reply transition,
+        then every engine transition it enables, to quiescence.
+
+        A reply the net cannot take changes nothing and comes back as ``unexpected``.
+        """
+        flight = self._in_flight.get(command_id)
+        if flight is None:
+            return self._unexpected(command_id, kind, "no command with this id is in flight")
+        reply = self._c.reply_of.get((flight.transition, kind))
+        if reply is None:
+            tr = self.net.transitions[flight.transition]
+            return self._unexpected(
+                command_id,
+                kind,
+                f"{tr.name} has no reply '{kind}' (expected "
+                f"{'|'.join(tr.command.replies if tr.command else ())})",
+            )
+        if not self._enabled(reply):  # the pending token is gone: a damaged state
+            return self._unexpected(command_id, kind, "the reply's pending place is empty")
+        del self._in_flight[command_id]
+        self._fire(reply)
+        return self._run(now, [Firing(self._c.names[reply], now, command_id)])
+
+    def _unexpected(self, command_id: int, kind: str, reason: str) -> StepResult:
+        return StepResult((), (), self.outcome(), UnexpectedReply(command_id, kind, reason))
+
+    def _run(self, now: float, firings: list[Firing]) -> StepResult:
+        commands: list[SentCommand] = []
+        count = 0
+        while (chosen := self._choose()) is not None:
+            count += 1
+            if count > self._max_firings:
+                raise EngineError(
+                    f"more than {self._max_firings} firings without waiting for the vehicle: "
+                    f"a cycle of engine transitions (last fired: {self._c.names[chosen]})"
+                )
+            self._fire(chosen)
+            tr = self.net.transitions[chosen]
+            if tr.command is not None:
+                sent = self._send(chosen, tr.command, now)
+                commands.append(sent)
+                firings.append(Firing(tr.name, now, sent.command_id))
+            else:
+                firings.append(Firing(tr.name, now))
+        return StepResult(tuple(firings), tuple(commands), self.outcome())
+
+    def _send(self, index: int, command: Command, now: float) -> SentCommand:
+        command_id = self._next_command_id
+        self._next_command_id += 1
+        timeout = dict(command.params).get(TIME_OUT)
+        timeout_at = now + float(timeout) if isinstance(timeout, int | float) else None
+        flight = _InFlight(command_id, index, now, timeout_at)
+        self._in_flight[command_id] = flight
+        return self._sent(flight)
+
+    def _sent(self, flight: _InFlight) -> SentCommand:
+        tr = self.net.transitions[flight.transition]
+        assert tr.command is not None
+        return SentCommand(
+            flight.command_id, tr.name, tr.command, flight.sent_at, flight.timeout_at
+        )
+
+    # ------------------------------------------------------------------ firing rule
+
+    def _enabled(self, t: int) -> bool:
+        self.checks += 1
+        m = self.marking
+        return all(m[p] >= w for p, w in self._c.inputs[t])
+
+    def _fire(self, t: int) -> None:
+        m = self.marking
+        for p, w in self._c.inputs[t]:
+            m[p] -= w
+        for p, w in self._c.outputs[t]:
+            m[p] += w
+        self.firings += 1
+        consumers = self._c.engine_consumers
+        for p in self._c.changes[t]:
+            for u in consumers[p]:
+                self._consider(u)
+
+    def _consider(self, t: int) -> None:
+        """Queue ``t`` if it is an enabled engine transition not queued yet."""
+        if not self._queued[t] and self._c.is_engine[t] and self._enabled(t):
+            self._queued[t] = True
+            heapq.heappush(self._heap, (-self._c.priority[t], t))
+
+    def _peek(self) -> int | None:
+        """The first enabled transition in policy order; stale heap entries dropped."""
+        heap = self._heap
+        while heap:
+            t = heap[0][1]
+            if self._enabled(t):
+                return t
+            heapq.heappop(heap)
+            self._queued[t] = False
+        return None
+
+    def _choose(self) -> int | None:
+        first = self._peek()
+        if first is None:
+            return None
+        if self.policy is Policy.RANDOM:
+            return self._choose_random()
+        heapq.heappop(self._heap)
+        self._queued[first] = False
+        return first
+
+    def _choose_random(self) -> int:
+        """Uniform among the enabled transitions of the top priority (O(enabled): tests)."""
+        top = self._heap[0][0]
+        entries = [e for e in self._heap if e[0] == top and self._enabled(e[1])]
+        _, chosen = entries[self._random.randrange(len(entries))]
+        self._heap.remove((top, chosen))
+        heapq.heapify(self._heap)
+        self._queued[chosen] = False
+        return chosen
+
+
+def _by_id(flight: _InFlight) -> int:
+    return flight.command_id
