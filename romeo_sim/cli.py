@@ -112,45 +112,12 @@ def _add_serve_parser(commands: argparse._SubParsersAction[argparse.ArgumentPars
     )
 
 
-class _KeyProblem(ValueError):
-    """The pre-shared key is missing, unreadable or too short."""
-
-
-def _load_key(args: argparse.Namespace) -> bytes:
-    """The pre-shared key from ``--key-file`` or ``--key-hex``.
-
-    Raises:
-        _KeyProblem: no key given, unreadable file, not hex, or shorter than 16 bytes.
-    """
-    from runtime.protocol import MIN_KEY_SIZE
-
-    hint = (
-        f"give --key-file FILE or --key-hex HEX with at least {MIN_KEY_SIZE} bytes "
-        "(32 random bytes recommended: python -c 'import secrets; print(secrets.token_hex(32))')"
-    )
-    if args.key_file is not None:
-        try:
-            text = args.key_file.read_text(encoding="ascii")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise _KeyProblem(f"cannot read the key file {args.key_file}: {exc}") from None
-        source = f"the key file {args.key_file}"
-    elif args.key_hex is not None:
-        text, source = args.key_hex, "--key-hex"
-    else:
-        raise _KeyProblem(f"serve needs a pre-shared key: {hint}")
-    try:
-        key = bytes.fromhex("".join(text.split()))
-    except ValueError:
-        raise _KeyProblem(f"{source} is not hex: {hint}") from None
-    if len(key) < MIN_KEY_SIZE:
-        raise _KeyProblem(f"{source} holds {len(key)} bytes, too short: {hint}")
-    return key
-
-
 def _serve(args: argparse.Namespace) -> int:
     try:
-        key = _load_key(args)
-    except _KeyProblem as exc:
+        from runtime.keys import KeyProblem, load_psk
+
+        key = load_psk(args.key_file, args.key_hex, who="serve")
+    except KeyProblem as exc:
         print(f"romeo-sim: {exc}", file=sys.stderr)
         return 2
     if not math.isfinite(args.speed) or args.speed <= 0.0:
