@@ -21,6 +21,9 @@ How it behaves:
   stamped with the right vehicle time. Telemetry samples are taken every
   ``1 / telemetry_hz`` seconds of *vehicle* time.
 * Rejected input is counted and logged; the connection and the vehicle go on.
+* Without sockets (`start_detached` and `accept`), an in-memory link such as
+  `runtime.memorylink.MemoryLink` hands the server its connections and receives the
+  telemetry, so the same server runs under a virtual clock.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from dataclasses import dataclass, field
 
 from romeo_sim.vehicle import Reply as VehicleReply
 from romeo_sim.vehicle import Vehicle
+from runtime.eventlog import EventLog, TelemetrySample
 from runtime.protocol import (
     MAX_DETAIL_BYTES,
     MIN_KEY_SIZE,
@@ -59,6 +63,9 @@ __all__ = ["ServerStats", "VehicleServer"]
 
 Clock = Callable[[], float]
 """A monotonic clock in seconds (wall time in production, a fake one in tests)."""
+
+DatagramSink = Callable[[bytes, tuple[str, int]], None]
+"""Where an in-memory connection's telemetry goes: (datagram, (host, port))."""
 
 
 def _stderr(line: str) -> None:
@@ -112,6 +119,7 @@ class _Connection:
     last_sent: float = 0.0
     telemetry_seq: int = 0
     closed: bool = field(default=False)
+    sink: DatagramSink | None = None
 
     def send(self, msg: StreamMessage, now: float) -> None:
         if self.closed or self.writer.is_closing():
@@ -145,6 +153,9 @@ class VehicleServer:
         nonces: source of random bytes for the handshake nonces; ``os.urandom`` by default.
         log: receives one line per notable event (rejections, connections); stderr by
             default.
+        event_log: the vehicle's side of the run's record (``docs/eventlog.md``): every
+            command received, reply issued and telemetry sample, on the vehicle clock;
+            committed about once a second and at `stop`. None: no record.
 
     Raises:
         ValueError: a key shorter than `MIN_KEY_SIZE`, or a speed, rate or interval that is
@@ -166,6 +177,7 @@ class VehicleServer:
         handshake_timeout: float = 10.0,
         nonces: Callable[[int], bytes] = os.urandom,
         log: Callable[[str], None] = _stderr,
+        event_log: EventLog | None = None,
     ) -> None:
         if not isinstance(psk, bytes | bytearray) or len(psk) < MIN_KEY_SIZE:
             raise ValueError(
@@ -193,6 +205,9 @@ class VehicleServer:
         self._handshake_timeout = handshake_timeout
         self._nonces = nonces
         self._log = log
+        self._events = event_log
+        self._samples = 0
+        self._last_commit = 0.0
         self.stats = ServerStats()
         self.ledger: ReplyLedger | None = None
         """The current mission's ledger; None until a controller's Hello is adopted."""
@@ -240,7 +255,7 @@ class VehicleServer:
             RuntimeError: the server was already started.
             OSError: the address cannot be bound.
         """
-        if self._server is not None:
+        if self._server is not None or self._stepper is not None:
             raise RuntimeError("VehicleServer.start() called twice")
         loop = asyncio.get_running_loop()
         self._server = await asyncio.start_server(self._on_connect, self._host, self._port)
@@ -250,10 +265,23 @@ class VehicleServer:
             asyncio.DatagramProtocol, local_addr=(self._host, 0)
         )
         self._udp = udp
+        self._start_stepping()
+        return self._address
+
+    async def start_detached(self) -> None:
+        """Start stepping the vehicle without opening any socket.
+
+        For in-memory links (a virtual-time run has no sockets): connections come through
+        `accept`, and each one's telemetry goes to the sink given there. Does nothing if
+        the server already runs (`start` or `start_detached`); `stop` stops it.
+        """
+        if self._stepper is None:
+            self._start_stepping()
+
+    def _start_stepping(self) -> None:
         self._last_wall = self._clock()
         self._next_sample = self.vehicle.time
         self._stepper = asyncio.create_task(self._step_loop(), name="romeo-sim stepper")
-        return self._address
 
     async def stop(self) -> None:
         """Close every connection, stop stepping, release the sockets. Safe to call twice."""
@@ -270,6 +298,7 @@ class VehicleServer:
             task.cancel()
         if self._handlers:
             await asyncio.gather(*self._handlers, return_exceptions=True)
+        self._commit_record(force=True)
         if self._server is not None:
             with contextlib.suppress(OSError):
                 await self._server.wait_closed()
@@ -300,6 +329,7 @@ class VehicleServer:
         replies: list[VehicleReply] = []
         while self._next_sample <= target:
             replies += self.vehicle.advance_to(max(self._next_sample, self.vehicle.time))
+            self._record_sample()
             self._send_telemetry()
             self._next_sample += self._telemetry_period
         replies += self.vehicle.advance_to(target)
@@ -313,11 +343,33 @@ class VehicleServer:
                 now = self._clock()
                 if now - active.last_sent >= self._heartbeat_interval:
                     active.send(Heartbeat(self.vehicle.time), now)
+            self._commit_record()
             await asyncio.sleep(self._tick)
+
+    def _record_sample(self) -> None:
+        if self._events is None:
+            return
+        t = self.vehicle.telemetry()
+        self._samples += 1
+        self._events.telemetry(
+            TelemetrySample(t.time, self._samples, t.x, t.y, t.z, t.psi, t.x_est, t.y_est)
+        )
+
+    def _record(self, what: str, /, **data: object) -> None:
+        if self._events is not None:
+            self._events.event(self.vehicle.time, what, **data)
+
+    def _commit_record(self, *, force: bool = False) -> None:
+        now = self._clock()
+        if self._events is not None and (force or now - self._last_commit >= 1.0):
+            self._last_commit = now
+            self._events.commit()
 
     def _send_telemetry(self) -> None:
         conn = self._active
-        if conn is None or conn.closed or conn.hello is None or self._udp is None:
+        if conn is None or conn.closed or conn.hello is None:
+            return
+        if conn.sink is None and self._udp is None:
             return
         port = conn.hello.telemetry_port
         key = conn.codec.session_key
@@ -332,7 +384,10 @@ class VehicleServer:
         except ProtocolError as exc:  # a non-finite state: a bug in the simulation
             self._log(f"telemetry not sent: {exc}")
             return
-        self._udp.sendto(datagram, (conn.peer_host, port))
+        if conn.sink is not None:
+            conn.sink(datagram, (conn.peer_host, port))
+        elif self._udp is not None:
+            self._udp.sendto(datagram, (conn.peer_host, port))
         self.stats.datagrams += 1
 
     # ------------------------------------------------------------------ replies
@@ -346,6 +401,13 @@ class VehicleServer:
             ledger, wire_id = origin
             wire = ledger.issue(wire_id, reply.kind, reply.time, _clip(reply.detail))
             self.stats.replies += 1
+            self._record(
+                "reply-issued",
+                command_id=wire_id,
+                reply_seq=wire.reply_seq,
+                kind=wire.kind,
+                detail=wire.detail,
+            )
             self._send_to_controller(wire)
 
     def _send_to_controller(self, msg: StreamMessage) -> None:
@@ -355,16 +417,42 @@ class VehicleServer:
 
     # ------------------------------------------------------------------ connections
 
+    async def accept(
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        *,
+        peer: tuple[str, int],
+        datagram_sink: DatagramSink | None = None,
+    ) -> None:
+        """Serve one connection that did not come through the TCP listener; return when it ends.
+
+        For in-memory links: ``reader`` and ``writer`` are the connection's two streams,
+        ``peer`` names the controller in the log, and the connection's telemetry goes to
+        ``datagram_sink(datagram, (peer host, announced port))`` (to the UDP socket, if
+        the server has one, when None).
+        """
+        await self._serve_connection(reader, writer, peer, datagram_sink)
+
     async def _on_connect(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await self._serve_connection(reader, writer, writer.get_extra_info("peername"), None)
+
+    async def _serve_connection(
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        peer: object,
+        sink: DatagramSink | None,
+    ) -> None:
         task = asyncio.current_task()
         if task is not None:
             self._handlers.add(task)
-        peer = writer.get_extra_info("peername")
         conn = _Connection(
             StreamCodec(self._psk, Role.VEHICLE, self._nonces(NONCE_SIZE)),
             writer,
             f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer),
             str(peer[0]) if isinstance(peer, tuple) else self._host,
+            sink=sink,
         )
         self._connections.add(conn)
         self.stats.connections += 1
@@ -452,6 +540,9 @@ class VehicleServer:
         self._active = conn
         conn.adopted = True
         self.stats.adopted += 1
+        self._record(
+            "adopt", peer=conn.peer, mission_id=hello.mission_id, resumed=conn.announced_resume
+        )
         self.vehicle.heard_from_controller()
         if conn.announced_resume:
             assert self.ledger is not None
@@ -483,7 +574,15 @@ class VehicleServer:
     def _on_command(self, conn: _Connection, cmd: Command) -> None:
         ledger = self.ledger
         assert ledger is not None
-        if not ledger.first_time(cmd.command_id):
+        first = ledger.first_time(cmd.command_id)
+        self._record(
+            "command-received",
+            command_id=cmd.command_id,
+            name=cmd.name,
+            params=dict(cmd.params),
+            repeat=not first,
+        )
+        if not first:
             self.stats.repeats += 1
             for reply in ledger.replies_for(cmd.command_id):
                 self.stats.resent += 1

@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 import random
+import socket
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
@@ -356,3 +357,44 @@ def test_cli_serves_for_the_given_duration(
     captured = capsys.readouterr()
     assert captured.out.startswith("listening on 127.0.0.1:")
     assert "stopped at vehicle time" in captured.err
+
+
+def test_a_detached_server_opens_no_socket_and_serves_handed_connections() -> None:
+    """start_detached/accept: what runtime.memorylink builds on (tested in depth there)."""
+    log: list[str] = []
+
+    async def scenario() -> tuple[VehicleServer, list[tuple[bytes, tuple[str, int]]]]:
+        server = make_server(log)
+        await server.start_detached()
+        await server.start_detached()  # already running: nothing happens
+        assert server.address is None
+        with pytest.raises(RuntimeError, match="called twice"):
+            await server.start()
+        ours, theirs = socket.socketpair()
+        reader, writer = await asyncio.open_connection(sock=theirs)
+        sent: list[tuple[bytes, tuple[str, int]]] = []
+        serving = asyncio.create_task(
+            server.accept(
+                reader,
+                writer,
+                peer=("handed", 1),
+                datagram_sink=lambda data, address: sent.append((data, address)),
+            )
+        )
+        ctl_reader, ctl_writer = await asyncio.open_connection(sock=ours)
+        ctl = Controller(ctl_reader, ctl_writer, b"d" * 16)
+        await ctl.send(Hello(b"d" * 16, 0.0, 5, False, 0, 4321))
+        ctl.hello_reply = await within(ctl.receive(HelloReply))
+        await ctl.send(Heartbeat(0.0))
+        await ctl.command(1, "DEPTH", z=1.0)
+        await ctl.reply(1, "ack")
+        await until(lambda: len(sent) >= 2)
+        await ctl.close()
+        await within(serving)
+        await server.stop()
+        return server, sent
+
+    server, sent = asyncio.run(within(scenario(), 10.0))
+    assert {address for _, address in sent} == {("handed", 4321)}
+    assert server.stats.datagrams == len(sent) and server.stats.commands == 1
+    assert any("connection from handed:1" in line for line in log), log

@@ -1,0 +1,241 @@
+"""``coral-run``: run a verified mission against a vehicle, and look at what happened.
+
+``coral-run MISSION [--vehicle HOST:PORT | --sim] [--realtime] [--link PROFILE]``
+compiles the mission, checks its certificate (``--verify`` verifies and issues one if
+there is none), runs it, writes the event logs to ``--out`` and draws the timeline.
+
+``coral-run --resume LOG [...]`` continues the mission of a controller that died
+(``kill -9`` included), from the last state it committed.
+
+``coral-run timeline LOG...`` merges a controller log and a vehicle log and plots them.
+
+Exit codes: 0 the mission reached a declared final marking; 1 it ended otherwise
+(deadlock, the vehicle lost the mission, the time limit); 2 bad usage or input (a mission
+that does not compile, no passing certificate, an unreadable log or key).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from coral_lang.diagnostics import CoralError
+
+EXIT_OK = 0
+EXIT_MISSION_FAILED = 1
+EXIT_USAGE = 2
+
+EXIT_CODES_HELP = (
+    "exit codes: 0 the mission reached a declared final marking, 1 it ended otherwise "
+    "(deadlock, vehicle lost the mission, time limit), 2 bad usage or input (mission does "
+    "not compile, no passing certificate, unreadable log or key)"
+)
+
+
+def _host_port(text: str) -> tuple[str, int]:
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT, got {text!r}")
+    return host, int(port)
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def build_run_parser() -> argparse.ArgumentParser:
+    """The parser of ``coral-run MISSION`` / ``coral-run --resume LOG``."""
+    parser = argparse.ArgumentParser(
+        prog="coral-run",
+        description="Run a verified CORAL mission against ROMEO (or the simulator) across "
+        "a real or emulated link, logging both sides. Also: 'coral-run timeline LOG...' "
+        "plots a run's logs.",
+        epilog=EXIT_CODES_HELP,
+    )
+    parser.add_argument("mission", nargs="?", metavar="MISSION", help="mission (.coral)")
+    parser.add_argument(
+        "--resume",
+        metavar="LOG",
+        type=Path,
+        help="continue the mission logged in LOG (a controller.sqlite) after a crash",
+    )
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument(
+        "--vehicle", type=_host_port, metavar="HOST:PORT", help="a vehicle serving the protocol"
+    )
+    where.add_argument(
+        "--sim", action="store_true", help="run the simulated ROMEO in this process (default)"
+    )
+    parser.add_argument(
+        "--realtime",
+        action="store_true",
+        help="with the simulator: real time over localhost sockets (default: virtual time)",
+    )
+    parser.add_argument(
+        "--speed",
+        type=_positive,
+        default=1.0,
+        help="with --sim --realtime: simulator seconds per wall second (default 1)",
+    )
+    parser.add_argument(
+        "--link",
+        metavar="PROFILE",
+        default=None,
+        help="emulate a link: a built-in profile (ideal, lan, genoa-lisbon, hostile) or a "
+        "YAML file (default: genoa-lisbon with the simulator, none with --vehicle)",
+    )
+    parser.add_argument(
+        "--certificate",
+        type=Path,
+        metavar="FILE",
+        help="the mission's certificate (default MISSION.certificate.json beside it)",
+    )
+    parser.add_argument(
+        "--verify",
+        action="store_true",
+        help="if there is no passing certificate, verify the mission and issue one",
+    )
+    parser.add_argument("--key-file", type=Path, metavar="FILE", help="pre-shared key, hex")
+    parser.add_argument("--key-hex", metavar="HEX", help="pre-shared key (prefer --key-file)")
+    parser.add_argument(
+        "--out", type=Path, default=Path("out/run"), help="logs and plots go here (default out/run)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of the simulated run")
+    parser.add_argument(
+        "--time-limit", type=_positive, metavar="SECONDS", help="end the run after this long"
+    )
+    parser.add_argument("--no-plots", action="store_true", help="do not draw the timeline")
+    parser.add_argument("-q", "--quiet", action="store_true", help="print the summary only")
+    return parser
+
+
+def build_timeline_parser() -> argparse.ArgumentParser:
+    """The parser of ``coral-run timeline``."""
+    parser = argparse.ArgumentParser(
+        prog="coral-run timeline",
+        description="Merge a controller log and a vehicle log on one time axis (the INIT "
+        "clock offset) and plot the events and the telemetry.",
+        epilog="exit codes: 0 plots written, 2 unreadable or mismatched logs",
+    )
+    parser.add_argument("logs", nargs="+", metavar="LOG", type=Path, help="event log (.sqlite)")
+    parser.add_argument("--out", type=Path, default=None, help="directory (default: the log's)")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``coral-run``."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if args and args[0] == "timeline":
+        return _timeline(build_timeline_parser().parse_args(args[1:]))
+    parser = build_run_parser()
+    options = parser.parse_args(args)
+    if options.mission is None and options.resume is None:
+        parser.error("give a MISSION to run, or --resume LOG")
+    if options.realtime and options.vehicle is not None:
+        parser.error("--realtime applies to the simulator; a --vehicle always runs in real time")
+    try:
+        return _run(options)
+    except CoralError as exc:
+        print(f"coral-run: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("coral-run: interrupted; resume with --resume", file=sys.stderr)
+        return EXIT_MISSION_FAILED
+
+
+def _run(options: argparse.Namespace) -> int:
+    import secrets
+
+    from runtime.eventlog import EventLog
+    from runtime.gate import approve_mission
+    from runtime.keys import load_psk
+    from runtime.link import load_link_profile
+    from runtime.run import RunConfig, controller_log_path, resume_mission, run_mission
+
+    simulated = options.vehicle is None
+    if options.key_file is None and options.key_hex is None and simulated:
+        psk = secrets.token_bytes(32)  # the simulator runs in this process: a fresh key
+    else:
+        psk = load_psk(options.key_file, options.key_hex, who="coral-run")
+    link_name = (
+        options.link if options.link is not None else ("genoa-lisbon" if simulated else None)
+    )
+    link = None if link_name is None else load_link_profile(link_name)
+    mission_path = options.mission
+    out_dir = options.out
+    if options.resume is not None:
+        with EventLog.open(options.resume) as log:
+            recorded = log.meta.get("mission_path")
+        if mission_path is None:
+            if not isinstance(recorded, str):
+                print(
+                    f"coral-run: {options.resume} does not name its mission; give MISSION",
+                    file=sys.stderr,
+                )
+                return EXIT_USAGE
+            mission_path = recorded
+        out_dir = options.resume.parent
+    approved = approve_mission(mission_path, options.certificate, issue=options.verify)
+    if approved.issued_now:
+        print(f"coral-run: verified; certificate written to {approved.approval.path}")
+    console = (lambda line: None) if options.quiet else print
+    config = RunConfig(
+        out_dir=out_dir,
+        psk=psk,
+        link=link,
+        seed=options.seed,
+        vehicle=options.vehicle,
+        realtime=options.realtime,
+        speed=options.speed,
+        time_limit=options.time_limit,
+        console=console,
+    )
+    if options.resume is not None:
+        result = resume_mission(approved, options.resume, config)
+    else:
+        if controller_log_path(out_dir).exists():
+            print(
+                f"coral-run: {controller_log_path(out_dir)} holds an earlier run; give another "
+                "--out, or --resume it",
+                file=sys.stderr,
+            )
+            return EXIT_USAGE
+        result = run_mission(approved, config)
+    if options.quiet:
+        print(result.summary())
+    if not options.no_plots:
+        from runtime.timeline import merge_logs, plot_timeline
+
+        logs = [p for p in (controller_log_path(out_dir), out_dir / "vehicle.sqlite") if p.exists()]
+        for path in plot_timeline(merge_logs(logs), out_dir):
+            print(f"coral-run: wrote {path}")
+    print(f"coral-run: logs in {out_dir}/")
+    return EXIT_OK if result.ok else EXIT_MISSION_FAILED
+
+
+def _timeline(options: argparse.Namespace) -> int:
+    from runtime.timeline import merge_logs, plot_timeline, summarize
+
+    try:
+        timeline = merge_logs(options.logs)
+        out = options.out if options.out is not None else options.logs[0].parent
+        out.mkdir(parents=True, exist_ok=True)
+        print(summarize(timeline))
+        for path in plot_timeline(timeline, out):
+            print(f"coral-run: wrote {path}")
+    except CoralError as exc:
+        print(f"coral-run: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    return EXIT_OK
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

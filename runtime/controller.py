@@ -1,0 +1,575 @@
+"""The controller: the CORAL Engine connected to a vehicle over a link, with its event log.
+
+`Controller.run` keeps one mission going through whatever the link does:
+
+* It connects, runs the handshake (``Hello`` / ``HelloReply``: the paper's INIT, which
+  gives the clock offset), proves the connection live with a ``Heartbeat``, and sends
+  every command in flight (after a reconnect: the same ids again; the vehicle carries out
+  each id once).
+* Each reply goes to the engine; the engine's firings and new commands, the reply's
+  sequence number and the new engine state are committed to the event log in ONE
+  transaction before anything is sent. So a crash can lose only work that was never
+  acknowledged to the vehicle: after a restart (`Controller.resume`) the vehicle re-sends
+  the replies after the last consumed one, and the commands are re-sent by id.
+* It sends a heartbeat when it has been quiet, and takes a silent or misbehaving link
+  (no valid frame for ``silence_limit`` seconds, too many rejected frames, a peer that
+  disagrees about the handshake) as lost: close, wait, reconnect.
+* Telemetry datagrams are checked (`DatagramReceiver`) and logged.
+
+Time is the running event loop's clock, so the same code runs in real time on sockets
+and instantly under `runtime.vclock.VirtualTimeLoop`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import enum
+import os
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from runtime.engine import Engine, Outcome, SentCommand, StepResult
+from runtime.eventlog import EventLog, TelemetrySample
+from runtime.link import Connection, Link
+from runtime.protocol import (
+    NONCE_SIZE,
+    ClockSync,
+    Command,
+    DatagramReceiver,
+    Heartbeat,
+    Hello,
+    HelloReply,
+    Rejected,
+    RejectReason,
+    Reply,
+    ReplyAck,
+    Role,
+    StreamCodec,
+    StreamMessage,
+    Telemetry,
+)
+
+__all__ = ["Controller", "ControllerOptions", "RunEnd", "RunResult"]
+
+
+class RunEnd(enum.Enum):
+    """How a run ended."""
+
+    FINAL = "final"  # a declared final marking: the mission is over as designed
+    DEADLOCK = "deadlock"  # nothing can happen and the marking is not final
+    VEHICLE_LOST_MISSION = "vehicle-lost-mission"  # the vehicle no longer knows it
+    TIME_LIMIT = "time-limit"  # the run's time limit passed first
+
+
+@dataclass(frozen=True)
+class ControllerOptions:
+    """Timings of the controller, in seconds of the loop's clock.
+
+    Attributes:
+        heartbeat_interval: send a heartbeat after this much quiet (also capped at a
+            quarter of the vehicle's silence time-out).
+        handshake_timeout: how long to wait for the ``HelloReply``; the paper's link
+            stalled for up to 7 s each way.
+        silence_limit: no valid frame from the vehicle for this long: the connection is
+            taken as dead and re-established.
+        reconnect_delays: waits between connection attempts, the last one repeated.
+        max_rejections: more rejected frames than this within ``rejection_window``
+            closes the connection (docs/protocol.md's recommendation).
+        rejection_window: see ``max_rejections``.
+        status_interval: print the status of the commands in flight this often.
+        time_limit: end the run after this long (None: no limit).
+    """
+
+    heartbeat_interval: float = 1.0
+    handshake_timeout: float = 20.0
+    silence_limit: float = 15.0
+    reconnect_delays: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0)
+    max_rejections: int = 16
+    rejection_window: float = 60.0
+    status_interval: float = 30.0
+    time_limit: float | None = None
+
+
+@dataclass
+class RunResult:
+    """What a run did, for the operator and the tests."""
+
+    end: RunEnd
+    marking: dict[str, int]
+    started_at: float
+    ended_at: float
+    commands_sent: int = 0
+    commands_resent: int = 0
+    replies: int = 0
+    duplicate_replies: int = 0
+    unexpected_replies: int = 0
+    connections: int = 0
+    rejected_frames: int = 0
+    telemetry: int = 0
+    telemetry_rejected: int = 0
+    clock_syncs: list[ClockSync] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """True when the mission reached a declared final marking."""
+        return self.end is RunEnd.FINAL
+
+    def summary(self) -> str:
+        """A few lines for the terminal."""
+        return (
+            f"mission ended: {self.end.value} in {self.ended_at - self.started_at:.1f} s, "
+            f"marking {self.marking}\n"
+            f"  {self.commands_sent} commands sent ({self.commands_resent} re-sent), "
+            f"{self.replies} replies consumed ({self.duplicate_replies} duplicates ignored, "
+            f"{self.unexpected_replies} unexpected), {self.connections} connections, "
+            f"{self.rejected_frames} frames rejected, {self.telemetry} telemetry samples"
+        )
+
+
+class _ConnectionLost(Exception):
+    """The current connection is gone or must be dropped; the reason is the message."""
+
+
+class _MissionLost(Exception):
+    """The vehicle no longer knows the mission."""
+
+
+def _print(line: str) -> None:
+    print(line, flush=True)
+
+
+class Controller:
+    """One mission run: an engine, a link to the vehicle, and the event log.
+
+    Use `Controller.start_new` for a new mission and `Controller.resume` after a crash.
+
+    Args:
+        engine: the engine, started (`Engine.start`) or restored.
+        link: how to reach the vehicle.
+        psk: the pre-shared key.
+        log: the event log; the controller commits to it.
+        mission_id: the mission's id on the wire (kept in the log).
+        consumed: the last reply sequence number consumed (0 for a new mission).
+        mission_known: whether the vehicle has already taken this mission (a ``resume``
+            it then refuses means it lost the mission).
+        options: timings.
+        nonces: source of the handshake nonces.
+        console: receives human-readable progress lines.
+    """
+
+    def __init__(
+        self,
+        engine: Engine,
+        link: Link,
+        psk: bytes,
+        log: EventLog,
+        *,
+        mission_id: int,
+        consumed: int = 0,
+        mission_known: bool = False,
+        options: ControllerOptions | None = None,
+        nonces: Callable[[int], bytes] = os.urandom,
+        console: Callable[[str], None] = _print,
+    ) -> None:
+        self.engine = engine
+        self.link = link
+        self._psk = bytes(psk)
+        self.log = log
+        self.mission_id = mission_id
+        self.consumed = consumed
+        self.mission_known = mission_known
+        self.options = options or ControllerOptions()
+        self._nonces = nonces
+        self._console = console
+        self._telemetry: DatagramReceiver | None = None
+        self._rejections: deque[float] = deque()
+        self._last_sent = 0.0
+        self._heartbeat_interval = self.options.heartbeat_interval
+        self._result: RunResult | None = None
+
+    # ------------------------------------------------------------------ construction
+
+    @classmethod
+    def start_new(
+        cls,
+        engine: Engine,
+        link: Link,
+        psk: bytes,
+        log: EventLog,
+        *,
+        mission_id: int,
+        now: float,
+        **kwargs: object,
+    ) -> Controller:
+        """Start ``engine``'s mission at ``now`` and commit its first step to ``log``."""
+        controller = cls(engine, link, psk, log, mission_id=mission_id, **kwargs)  # type: ignore[arg-type]
+        step = engine.start(now)
+        log.event(now, "mission-start", mission_id=mission_id, marking=engine.marking_dict())
+        controller._log_step(now, step)
+        controller._commit()
+        return controller
+
+    @classmethod
+    def resume(
+        cls,
+        engine_factory: Callable[[dict[str, object]], Engine],
+        link: Link,
+        psk: bytes,
+        log: EventLog,
+        **kwargs: object,
+    ) -> Controller:
+        """Continue the mission of ``log`` from its last committed state.
+
+        Args:
+            engine_factory: rebuilds the engine from the saved engine state (usually
+                ``lambda s: Engine.restore(net, approval, s)``).
+
+        Raises:
+            runtime.engine.EngineError: the saved state does not fit the net.
+            ValueError: the log has no committed state.
+        """
+        state = log.checkpoint()
+        if state is None:
+            raise ValueError(f"{log.path}: no committed state to resume from")
+        engine_state = state.get("engine")
+        if not isinstance(engine_state, dict):
+            raise ValueError(f"{log.path}: the committed state has no engine state")
+        engine = engine_factory(engine_state)
+        mission_id = state.get("mission_id")
+        consumed = state.get("consumed")
+        if not isinstance(mission_id, int) or not isinstance(consumed, int):
+            raise ValueError(f"{log.path}: the committed state lacks mission_id/consumed")
+        return cls(
+            engine,
+            link,
+            psk,
+            log,
+            mission_id=mission_id,
+            consumed=consumed,
+            mission_known=bool(state.get("mission_known", True)),
+            **kwargs,  # type: ignore[arg-type]
+        )
+
+    # ------------------------------------------------------------------ the run
+
+    def _now(self) -> float:
+        return asyncio.get_running_loop().time()
+
+    async def run(self) -> RunResult:
+        """Drive the mission to its end; returns what happened."""
+        now = self._now()
+        result = self._result = RunResult(RunEnd.FINAL, {}, now, now)
+        deadline = None if self.options.time_limit is None else now + self.options.time_limit
+        port = await self.link.open_telemetry(self._on_datagram)
+        attempt = 0
+        try:
+            while (outcome := self.engine.outcome()) is Outcome.RUNNING:
+                if deadline is not None and self._now() >= deadline:
+                    result.end = RunEnd.TIME_LIMIT
+                    break
+                try:
+                    conn = await self.link.connect()
+                except ConnectionError as exc:
+                    delay = self.options.reconnect_delays[
+                        min(attempt, len(self.options.reconnect_delays) - 1)
+                    ]
+                    attempt += 1
+                    self._note(
+                        "connect-failed",
+                        f"cannot reach the vehicle ({exc}); retry in {delay:.1f} s",
+                        reason=str(exc),
+                    )
+                    await asyncio.sleep(delay)
+                    continue
+                result.connections += 1
+                try:
+                    await self._session(conn, port, deadline)
+                    attempt = 0
+                except _ConnectionLost as exc:
+                    self._note("connection-lost", f"connection lost: {exc}", reason=str(exc))
+                    attempt += 1
+                    delay = self.options.reconnect_delays[
+                        min(attempt - 1, len(self.options.reconnect_delays) - 1)
+                    ]
+                    await asyncio.sleep(delay)
+                finally:
+                    conn.close()
+            else:
+                result.end = RunEnd.FINAL if outcome is Outcome.FINAL else RunEnd.DEADLOCK
+        except _MissionLost as exc:
+            result.end = RunEnd.VEHICLE_LOST_MISSION
+            self._note("mission-lost", str(exc))
+        result.ended_at = self._now()
+        result.marking = self.engine.marking_dict()
+        self.log.event(
+            result.ended_at,
+            "mission-end",
+            end=result.end.value,
+            final=result.end is RunEnd.FINAL,
+            marking=result.marking,
+        )
+        self._commit()
+        self._console(result.summary())
+        return result
+
+    async def _session(self, conn: Connection, port: int, deadline: float | None) -> None:
+        """One connection: handshake, re-send, then replies until the mission ends."""
+        codec = StreamCodec(self._psk, Role.CONTROLLER, self._nonces(NONCE_SIZE))
+        resume = self.mission_known or self.consumed > 0
+        hello = Hello(codec.nonce, self._now(), self.mission_id, resume, self.consumed, port)
+        self._write(conn, codec, hello)
+        reply = await self._await_hello_reply(conn, codec)
+        now = self._now()
+        sync = ClockSync.from_handshake(hello, reply, now)
+        assert self._result is not None
+        self._result.clock_syncs.append(sync)
+        self.log.event(
+            now,
+            "handshake",
+            offset=sync.vehicle_ahead,
+            delay=sync.delay,
+            resumed=reply.resumed,
+            asked_resume=resume,
+            vehicle_last_reply_seq=reply.last_reply_seq,
+        )
+        if resume and not reply.resumed and self.mission_known:
+            raise _MissionLost(
+                f"the vehicle no longer knows mission {self.mission_id} (it restarted or "
+                "ended it, e.g. surfaced after losing the controller): not resuming blind"
+            )
+        assert codec.session_key is not None
+        self._telemetry = DatagramReceiver(codec.session_key)
+        self._heartbeat_interval = max(
+            0.05, min(self.options.heartbeat_interval, reply.silence_timeout / 4)
+        )
+        self._write(conn, codec, Heartbeat(now))  # proves the connection live
+        self._commit()
+        for sent in self.engine.in_flight():
+            self._send_command(conn, codec, sent, resend=self._result.connections > 1)
+        self._console(
+            f"t={now:.1f} connected (one-way delay {sync.delay * 1000:.0f} ms, vehicle "
+            f"clock {sync.vehicle_ahead:+.3f} s); {len(self.engine.in_flight())} commands in flight"
+        )
+        heartbeats = asyncio.create_task(self._heartbeats(conn, codec))
+        try:
+            await self._receive(conn, codec, deadline)
+        finally:
+            heartbeats.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await heartbeats
+
+    async def _await_hello_reply(self, conn: Connection, codec: StreamCodec) -> HelloReply:
+        end = self._now() + self.options.handshake_timeout
+        while True:
+            left = end - self._now()
+            if left <= 0:
+                raise _ConnectionLost("no HelloReply in time")
+            try:
+                data = await asyncio.wait_for(conn.read(), left)
+            except TimeoutError:
+                raise _ConnectionLost("no HelloReply in time") from None
+            if not data:
+                raise _ConnectionLost("closed during the handshake")
+            for item in codec.feed(data):
+                if isinstance(item, HelloReply):
+                    return item
+                self._rejected_or_early(item)
+
+    def _rejected_or_early(self, item: StreamMessage | Rejected) -> None:
+        if isinstance(item, Rejected):
+            self._on_rejected(item)
+
+    async def _receive(self, conn: Connection, codec: StreamCodec, deadline: float | None) -> None:
+        silence = self.options.silence_limit
+        status_every = self.options.status_interval
+        next_status = self._now() + status_every
+        while self.engine.outcome() is Outcome.RUNNING:
+            now = self._now()
+            if deadline is not None and now >= deadline:
+                return
+            wait = silence if deadline is None else min(silence, deadline - now)
+            try:
+                data = await asyncio.wait_for(conn.read(), max(wait, 0.0))
+            except TimeoutError:
+                if deadline is not None and self._now() >= deadline:
+                    return
+                raise _ConnectionLost(
+                    f"nothing valid from the vehicle for {silence:.0f} s"
+                ) from None
+            if not data:
+                raise _ConnectionLost("closed by the peer or the network")
+            valid = False
+            for item in codec.feed(data):
+                if isinstance(item, Rejected):
+                    self._on_rejected(item)
+                    continue
+                valid = True
+                if isinstance(item, Reply):
+                    self.mission_known = True
+                    self._on_reply(conn, codec, item)
+                elif isinstance(item, Heartbeat):
+                    self.mission_known = True
+            if not valid:
+                # Only garbage arrived: it must not keep a dead connection alive forever.
+                continue
+            if self._now() >= next_status:
+                next_status = self._now() + status_every
+                for line in self.status():
+                    self._console(f"  {line}")
+
+    def _on_reply(self, conn: Connection, codec: StreamCodec, reply: Reply) -> None:
+        assert self._result is not None
+        now = self._now()
+        if reply.reply_seq <= self.consumed:
+            self._result.duplicate_replies += 1
+            self._write(conn, codec, ReplyAck(self.consumed))
+            return
+        step = self.engine.on_reply(reply.command_id, reply.kind, now)
+        transition = step.firings[0].transition if step.firings else None
+        self.log.event(
+            now,
+            "reply",
+            command_id=reply.command_id,
+            reply_seq=reply.reply_seq,
+            kind=reply.kind,
+            vehicle_time=reply.vehicle_time,
+            detail=reply.detail,
+            transition=transition,
+        )
+        self._result.replies += 1
+        if step.unexpected is not None:
+            self._result.unexpected_replies += 1
+            self._note(
+                "reply-unexpected",
+                f"reply #{reply.reply_seq} '{reply.kind}' for command {reply.command_id} "
+                f"ignored: {step.unexpected.reason}",
+                command_id=reply.command_id,
+            )
+        else:
+            self._console(
+                f"t={now:.1f} #{reply.command_id} replied {reply.kind}"
+                + (f" ({reply.detail})" if reply.detail else "")
+            )
+        self.consumed = reply.reply_seq
+        self._log_step(now, step)
+        self._commit()
+        self._write(conn, codec, ReplyAck(self.consumed))
+        for sent in step.commands:
+            self._send_command(conn, codec, sent, resend=False)
+
+    def _send_command(
+        self, conn: Connection, codec: StreamCodec, sent: SentCommand, *, resend: bool
+    ) -> None:
+        assert self._result is not None
+        params = dict(sent.command.params)
+        self._write(conn, codec, Command(sent.command_id, sent.command.name, sent.sent_at, params))
+        if resend:
+            self._result.commands_resent += 1
+            self.log.event(self._now(), "command-resent", command_id=sent.command_id)
+        else:
+            self._result.commands_sent += 1
+            self._console(
+                f"t={sent.sent_at:.1f} #{sent.command_id} {sent.transition}: "
+                f"{sent.command.header()}"
+            )
+
+    def _log_step(self, now: float, step: StepResult) -> None:
+        for firing in step.firings:
+            self.log.event(now, "fire", transition=firing.transition, command_id=firing.command_id)
+        for sent in step.commands:
+            self.log.event(
+                now,
+                "command-sent",
+                command_id=sent.command_id,
+                transition=sent.transition,
+                name=sent.command.name,
+                params=dict(sent.command.params),
+                resources=list(sent.command.resources),
+                timeout_at=sent.timeout_at,
+            )
+
+    def _commit(self) -> None:
+        self.log.commit(
+            {
+                "engine": self.engine.snapshot(),
+                "mission_id": self.mission_id,
+                "consumed": self.consumed,
+                "mission_known": self.mission_known,
+            }
+        )
+
+    async def _heartbeats(self, conn: Connection, codec: StreamCodec) -> None:
+        # Sleep until the heartbeat is due; "due" allows a millisecond of slack, because a
+        # sleep of the remaining 1e-16 s does not move a clock that reads 1e3 s.
+        while not conn.closed:
+            due = self._last_sent + self._heartbeat_interval
+            if self._now() >= due - 1e-3:
+                self._write(conn, codec, Heartbeat(self._now()))
+                due = self._last_sent + self._heartbeat_interval
+            await asyncio.sleep(due - self._now())
+            self.log.commit(None)  # telemetry and notes reach the disk once a beat
+
+    def _write(self, conn: Connection, codec: StreamCodec, msg: StreamMessage) -> None:
+        conn.write(codec.encode(msg))
+        self._last_sent = self._now()
+
+    # ------------------------------------------------------------------ bad input
+
+    def _on_rejected(self, item: Rejected) -> None:
+        assert self._result is not None
+        self._result.rejected_frames += 1
+        now = self._now()
+        self.log.event(now, "rejected", reason=item.reason.value, detail=item.detail)
+        if item.reason in (RejectReason.NO_SESSION, RejectReason.UNEXPECTED):
+            raise _ConnectionLost(
+                f"the vehicle disagrees about the handshake ({item.reason.value})"
+            )
+        window = self._rejections
+        window.append(now)
+        while window and window[0] < now - self.options.rejection_window:
+            window.popleft()
+        if len(window) > self.options.max_rejections:
+            window.clear()
+            raise _ConnectionLost(
+                f"more than {self.options.max_rejections} rejected frames within "
+                f"{self.options.rejection_window:.0f} s"
+            )
+
+    def _on_datagram(self, data: bytes) -> None:
+        receiver = self._telemetry
+        result = self._result
+        if receiver is None or result is None:
+            return
+        item = receiver.accept(data)
+        if isinstance(item, Telemetry):
+            result.telemetry += 1
+            self.log.telemetry(
+                TelemetrySample(
+                    item.vehicle_time,
+                    item.seq,
+                    item.x,
+                    item.y,
+                    item.z,
+                    item.psi,
+                    item.est_x,
+                    item.est_y,
+                )
+            )
+        else:
+            result.telemetry_rejected += 1
+            if item.reason is not RejectReason.LATE:
+                self.log.event(self._now(), "telemetry-rejected", reason=item.reason.value)
+
+    # ------------------------------------------------------------------ status
+
+    def status(self) -> list[str]:
+        """One line per command in flight: sent when, awaiting what, time-out when."""
+        now = self._now()
+        return [s.line(now) for s in self.engine.status()]
+
+    def _note(self, kind: str, text: str, **data: object) -> None:
+        now = self._now()
+        self.log.event(now, kind, **data)
+        self._console(f"t={now:.1f} {text}")

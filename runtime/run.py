@@ -1,0 +1,237 @@
+"""One mission run, end to end: the approved net, a link, the vehicle, the logs, the plots.
+
+`run_mission` is what ``coral-run`` does. Three ways to reach a vehicle:
+
+* the simulator in virtual time (default): `romeo_sim` and the controller in one process,
+  joined by an in-memory link through the link emulator, under
+  `runtime.vclock.VirtualTimeLoop`; a mission of many minutes runs in seconds, and
+  the same seed gives the same run;
+* the simulator in real time (``realtime=True``): the same, over real TCP and UDP
+  sockets on localhost, emulator applied on the controller's side;
+* a vehicle at ``HOST:PORT`` (``vehicle=...``): real sockets, real time; the emulator
+  only if a link profile is given.
+
+Both sides log to SQLite in ``out_dir`` (``controller.sqlite``; ``vehicle.sqlite`` when
+the vehicle is ours), and the timeline plots are drawn from the two logs.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import random
+import secrets
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from runtime.controller import Controller, ControllerOptions, RunResult
+from runtime.engine import Engine, Policy
+from runtime.eventlog import EventLog
+from runtime.gate import ApprovedMission
+from runtime.link import Link, LinkEmulator, LinkProfile, MemoryLink, SocketLink
+from runtime.vclock import run_virtual
+
+__all__ = ["RunConfig", "controller_log_path", "resume_mission", "run_mission"]
+
+CONTROLLER_LOG = "controller.sqlite"
+VEHICLE_LOG = "vehicle.sqlite"
+
+
+def controller_log_path(out_dir: Path) -> Path:
+    """Where the controller's event log goes."""
+    return out_dir / CONTROLLER_LOG
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """How to run a mission.
+
+    Attributes:
+        out_dir: logs and plots go here; must not hold an earlier run's logs.
+        psk: the pre-shared key (the simulator is given the same one).
+        link: the link profile to emulate (None: the link as it is).
+        seed: seeds the emulator, the simulator's noise, nonces and mission id for the
+            simulator, so a simulated run is reproducible.
+        vehicle: HOST, PORT of a vehicle; None runs the simulator.
+        realtime: run the simulator in real time over localhost sockets.
+        speed: simulator seconds per wall second in real time (1: as at sea).
+        time_limit: end the run after this many seconds (None: no limit).
+        policy: the engine's choice rule.
+        console: receives progress lines.
+    """
+
+    out_dir: Path
+    psk: bytes
+    link: LinkProfile | None = None
+    seed: int = 0
+    vehicle: tuple[str, int] | None = None
+    realtime: bool = False
+    speed: float = 1.0
+    time_limit: float | None = None
+    policy: Policy = Policy.PRIORITY
+    controller: ControllerOptions = field(default_factory=ControllerOptions)
+    console: Callable[[str], None] = print
+
+
+def _meta(mission: ApprovedMission, config: RunConfig) -> dict[str, object]:
+    return {
+        "mission_path": str(mission.path.resolve()),
+        "certificate": mission.approval.path,
+        "link": None if config.link is None else config.link.name,
+        "seed": config.seed,
+        "vehicle": "sim" if config.vehicle is None else f"{config.vehicle[0]}:{config.vehicle[1]}",
+        "realtime": config.realtime or config.vehicle is not None,
+    }
+
+
+def run_mission(mission: ApprovedMission, config: RunConfig) -> RunResult:
+    """Run ``mission`` as ``config`` says; returns the controller's result."""
+    config.out_dir.mkdir(parents=True, exist_ok=True)
+    rng = random.Random(config.seed)
+    simulated = config.vehicle is None
+    mission_id = rng.getrandbits(63) if simulated else secrets.randbits(63)
+    log = EventLog.create(
+        controller_log_path(config.out_dir),
+        role="controller",
+        mission=mission.net.name,
+        meta=_meta(mission, config),
+        net_json=_net_json(mission),
+        net_digest=mission.net.digest(),
+    )
+    try:
+        engine = Engine(mission.net, mission.approval, policy=config.policy, seed=config.seed)
+
+        def make(link: Link, now: float, nonces: Callable[[int], bytes]) -> Controller:
+            return Controller.start_new(
+                engine,
+                link,
+                config.psk,
+                log,
+                mission_id=mission_id,
+                now=now,
+                options=_options(config),
+                nonces=nonces,
+                console=config.console,
+            )
+
+        return _drive(config, make, rng, mission.net.name)
+    finally:
+        log.close()
+
+
+def resume_mission(mission: ApprovedMission, log_path: Path, config: RunConfig) -> RunResult:
+    """Continue the mission logged in ``log_path`` after the controller died.
+
+    Raises:
+        runtime.eventlog.EventLogError: the log cannot be opened for writing.
+        runtime.engine.EngineError: the log's state does not belong to this net.
+        ValueError: the log holds no committed state.
+    """
+    log = EventLog.open(log_path, writable=True)
+    try:
+        if log.net_digest is not None and log.net_digest != mission.net.digest():
+            raise ValueError(
+                f"{log_path} is the log of net {log.net_digest}, but {mission.path} now "
+                f"compiles to {mission.net.digest()}: resume with the mission that was running"
+            )
+        rng = random.Random(config.seed ^ 0x5EED)
+
+        def make(link: Link, now: float, nonces: Callable[[int], bytes]) -> Controller:
+            log.event(now, "resume", pid=os.getpid())
+            return Controller.resume(
+                lambda state: Engine.restore(
+                    mission.net, mission.approval, state, policy=config.policy, seed=config.seed
+                ),
+                link,
+                config.psk,
+                log,
+                options=_options(config),
+                nonces=nonces,
+                console=config.console,
+            )
+
+        return _drive(config, make, rng, mission.net.name)
+    finally:
+        log.close()
+
+
+def _options(config: RunConfig) -> ControllerOptions:
+    if config.time_limit is None:
+        return config.controller
+    from dataclasses import replace
+
+    return replace(config.controller, time_limit=config.time_limit)
+
+
+def _net_json(mission: ApprovedMission) -> str:
+    import json
+
+    return json.dumps(mission.net.canonical(), sort_keys=True)
+
+
+MakeController = Callable[[Link, float, Callable[[int], bytes]], Controller]
+
+
+def _drive(config: RunConfig, make: MakeController, rng: random.Random, mission: str) -> RunResult:
+    if config.vehicle is not None:
+        host, port = config.vehicle
+        return asyncio.run(_remote(config, make, host, port))
+    if config.realtime:
+        return asyncio.run(_simulated(config, make, rng, mission, sockets=True))
+    return run_virtual(_simulated(config, make, rng, mission, sockets=False))
+
+
+def _emulator(config: RunConfig) -> LinkEmulator | None:
+    return None if config.link is None else LinkEmulator(config.link, seed=config.seed)
+
+
+async def _remote(config: RunConfig, make: MakeController, host: str, port: int) -> RunResult:
+    link = SocketLink(host, port, _emulator(config), log=config.console)
+    try:
+        controller = make(link, asyncio.get_running_loop().time(), os.urandom)
+        return await controller.run()
+    finally:
+        await link.aclose()
+
+
+async def _simulated(
+    config: RunConfig, make: MakeController, rng: random.Random, mission: str, *, sockets: bool
+) -> RunResult:
+    from romeo_sim.config import default_config
+    from romeo_sim.server import VehicleServer
+    from romeo_sim.vehicle import Vehicle
+
+    loop = asyncio.get_running_loop()
+    vehicle_rng = random.Random(rng.getrandbits(64))
+    controller_rng = random.Random(rng.getrandbits(64))
+    vehicle_log = EventLog.create(
+        config.out_dir / VEHICLE_LOG,
+        role="vehicle",
+        mission=mission,
+        meta={"seed": config.seed, "speed": config.speed},
+    )
+    server = VehicleServer(
+        Vehicle(default_config(), seed=config.seed),
+        config.psk,
+        clock=loop.time,
+        speed=config.speed if sockets else 1.0,
+        nonces=vehicle_rng.randbytes,
+        log=lambda line: config.console(f"  vehicle: {line}"),
+        event_log=vehicle_log,
+    )
+    link: Link
+    try:
+        if sockets:
+            host, port = await server.start()
+            link = SocketLink(host, port, _emulator(config), log=config.console)
+        else:
+            link = MemoryLink(server, _emulator(config), log=config.console)
+        try:
+            controller = make(link, loop.time(), controller_rng.randbytes)
+            return await controller.run()
+        finally:
+            await link.aclose()
+    finally:
+        await server.stop()
+        vehicle_log.close()

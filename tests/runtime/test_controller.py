@@ -1,0 +1,222 @@
+"""The controller end to end against the simulated ROMEO: virtual time, emulated links,
+resets and outages, hostile bytes, a vehicle that lost the mission."""
+
+from __future__ import annotations
+
+import asyncio
+import random
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from analysis.certificate import CertificateCheck
+from analysis.statespace import explore
+from coral_lang.compiler import compile_mission
+from coral_lang.net import Net
+from romeo_sim.config import default_config
+from romeo_sim.server import VehicleServer
+from romeo_sim.vehicle import Vehicle
+from runtime.controller import Controller, ControllerOptions, RunEnd, RunResult
+from runtime.engine import Engine
+from runtime.eventlog import EventLog
+from runtime.link import BUILTIN_PROFILES, LinkEmulator, MemoryLink
+from runtime.protocol import Command, Reply
+from runtime.vclock import run_virtual
+from tests.runtime.helpers import POOL_MISSION, approve
+
+PSK = bytes(range(32))
+
+
+@pytest.fixture(scope="module")
+def pool(tmp_path_factory: pytest.TempPathFactory) -> tuple[Net, CertificateCheck]:
+    net = compile_mission(POOL_MISSION)
+    return net, approve(net, tmp_path_factory.mktemp("pool"))
+
+
+@dataclass
+class Run:
+    result: RunResult
+    server: VehicleServer
+    log_path: Path
+
+
+def simulate(
+    net: Net,
+    approval: CertificateCheck,
+    tmp: Path,
+    *,
+    profile: str = "genoa-lisbon",
+    seed: int = 0,
+    wrap: type[MemoryLink] = MemoryLink,
+) -> Run:
+    """Run the mission against the simulator under virtual time."""
+    rng = random.Random(seed)
+    log_path = tmp / f"controller-{profile}-{seed}.sqlite"
+
+    async def main() -> tuple[RunResult, VehicleServer]:
+        loop = asyncio.get_running_loop()
+        server = VehicleServer(
+            Vehicle(default_config(), seed=seed),
+            PSK,
+            clock=loop.time,
+            nonces=random.Random(seed + 1).randbytes,
+            log=lambda line: None,
+        )
+        link = wrap(server, LinkEmulator(BUILTIN_PROFILES[profile], seed=seed))
+        log = EventLog.create(log_path, role="controller", mission=net.name, meta={})
+        try:
+            controller = Controller.start_new(
+                Engine(net, approval),
+                link,
+                PSK,
+                log,
+                mission_id=rng.getrandbits(63),
+                now=loop.time(),
+                nonces=rng.randbytes,
+                console=lambda line: None,
+                options=ControllerOptions(time_limit=3600.0),
+            )
+            result = await controller.run()
+        finally:
+            log.close()
+            await link.aclose()
+            await server.stop()
+        return result, server
+
+    result, server = run_virtual(main())
+    return Run(result, server, log_path)
+
+
+def check_nothing_lost(run: Run, net: Net) -> None:
+    """Every command logged once and carried out once; every reply consumed once."""
+    with EventLog.open(run.log_path) as log:
+        sent = [e.data["command_id"] for e in log.events("command-sent")]
+        replies = [e.data for e in log.events("reply")]
+        firings = [str(e.data["transition"]) for e in log.events("fire")]
+    assert len(sent) == len(set(sent)) == run.result.commands_sent
+    answered = Counter(r["command_id"] for r in replies)
+    assert set(answered) == set(sent) and set(answered.values()) == {1}
+    seqs = [r["reply_seq"] for r in replies]
+    assert seqs == list(range(1, len(seqs) + 1))
+    # The vehicle carried out each command id once, however often it was re-sent.
+    assert run.server.stats.commands == len(sent)
+    # Refinement: replaying the logged firings stays inside the verified state space.
+    space = explore(net)
+    reachable = {tuple(row) for row in space.markings.tolist()}
+    marking = net.initial_marking()
+    for name in firings:
+        tr = net.transition(name)
+        assert net.enabled(marking, tr), name
+        marking = net.fire(marking, tr)
+        assert marking in reachable
+    assert net.marking_dict(marking) == run.result.marking
+
+
+def test_the_pool_mission_completes_over_the_genoa_lisbon_link(
+    pool: tuple[Net, CertificateCheck], tmp_path: Path
+) -> None:
+    net, approval = pool
+    run = simulate(net, approval, tmp_path)
+    assert run.result.end is RunEnd.FINAL
+    assert run.result.marking == {"mission_complete": 1}
+    assert run.result.telemetry > 100
+    assert len(run.result.clock_syncs) == run.result.connections
+    check_nothing_lost(run, net)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_resets_and_outages_lose_and_repeat_nothing(
+    pool: tuple[Net, CertificateCheck], tmp_path: Path, seed: int
+) -> None:
+    net, approval = pool
+    run = simulate(net, approval, tmp_path, profile="hostile", seed=seed)
+    assert run.result.end is RunEnd.FINAL
+    assert run.result.connections > 1  # the hostile link did cut the connection
+    check_nothing_lost(run, net)
+
+
+class _Tampering(MemoryLink):
+    """Puts garbage, a forged frame and a replayed frame in front of the vehicle's bytes."""
+
+    async def connect(self):  # type: ignore[no-untyped-def]
+        conn = await super().connect()
+        original = conn.read
+        reads = 0
+        recorded = b""
+
+        async def read() -> bytes:
+            nonlocal reads, recorded
+            data = await original()
+            reads += 1
+            if not data or reads < 3:
+                return data
+            if not recorded:
+                recorded = data  # replayed later
+            junk = b"\xc5\x01garbage" + bytes(40)
+            forged = b"\xc5\x01\x11" + bytes(60)  # looks like a Reply frame, bad tag
+            replay = recorded if reads % 5 == 0 else b""
+            return junk + forged + replay + data
+
+        conn.read = read  # type: ignore[method-assign]
+        return conn
+
+
+def test_hostile_bytes_are_dropped_and_the_mission_goes_on(
+    pool: tuple[Net, CertificateCheck], tmp_path: Path
+) -> None:
+    net, approval = pool
+    run = simulate(net, approval, tmp_path, profile="lan", wrap=_Tampering)
+    assert run.result.end is RunEnd.FINAL
+    assert run.result.rejected_frames > 0
+    check_nothing_lost(run, net)
+
+
+def test_a_vehicle_that_lost_the_mission_ends_the_run(
+    pool: tuple[Net, CertificateCheck], tmp_path: Path
+) -> None:
+    """Resuming against a vehicle that restarted must not assume its state."""
+    net, approval = pool
+    log_path = tmp_path / "ctl.sqlite"
+
+    async def main() -> RunResult:
+        loop = asyncio.get_running_loop()
+        server = VehicleServer(Vehicle(default_config(), seed=0), PSK, clock=loop.time)
+        link = MemoryLink(server, None)
+        log = EventLog.create(log_path, role="controller", mission=net.name, meta={})
+        engine = Engine(net, approval)
+        engine.start(0.0)
+        log.commit(
+            {"engine": engine.snapshot(), "mission_id": 42, "consumed": 1, "mission_known": True}
+        )
+        try:
+            controller = Controller.resume(
+                lambda s: Engine.restore(net, approval, s),
+                link,
+                PSK,
+                log,
+                console=lambda line: None,
+            )
+            return await controller.run()
+        finally:
+            log.close()
+            await link.aclose()
+            await server.stop()
+
+    result = run_virtual(main())
+    assert result.end is RunEnd.VEHICLE_LOST_MISSION
+    with EventLog.open(log_path) as log:
+        assert log.count("mission-lost") == 1
+
+
+def test_command_and_reply_frames_fit_the_paper_link(pool: tuple[Net, CertificateCheck]) -> None:
+    """Every command the pool mission sends fits in well under one 9600 bps second."""
+    from runtime.protocol import frame_size
+
+    net, _ = pool
+    for tr in net.transitions:
+        if tr.command is not None:
+            size = frame_size(Command(1, tr.command.name, 0.0, dict(tr.command.params)))
+            assert size < 120, (tr.name, size)
+    assert frame_size(Reply(1, 1, "timeout", 0.0)) < 60
