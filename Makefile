@@ -23,9 +23,10 @@ demo: $(STAMP)
 	$(BIN)/coral-check verify $(MISSION) -o out/pool_mission.verification.txt \
 		--certificate out/pool_mission.certificate.json
 	$(BIN)/coral-check verify $(MISSION) --format json -o out/pool_mission.verification.json
+	$(BIN)/coral-check $(MISSION) --format html -o out/pool_mission.report.html
 	@cat out/pool_mission.verification.txt
 	$(BIN)/romeo-sim mission --out out/sim --seed 0
-	@echo "verification report: out/pool_mission.verification.txt (.json)"
+	@echo "verification report: out/pool_mission.verification.txt (.json, .report.html)"
 	@echo "pre-mission certificate: out/pool_mission.certificate.json"
 	@echo "simulated run, logs and plots: out/sim/ (mission.png, phase*.png, *.csv)"
 
@@ -46,6 +47,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/compile.py
 	$(BIN)/python bench/statespace.py
 	$(BIN)/python bench/sim.py
+	$(BIN)/python bench/cli.py
 
 clean:
 	rm -rf $(VENV) out .mypy_cache .pytest_cache .ruff_cache .hypothesis

@@ -19,7 +19,6 @@ import datetime as dt
 import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from importlib import metadata
 from pathlib import Path
 
 from analysis.report import Report, Verdict
@@ -41,6 +40,8 @@ class CertificateError(CoralError, ValueError):
 
 def tool_version() -> str:
     """The installed coral version (``0+unknown`` when run from an uninstalled tree)."""
+    from importlib import metadata  # about 20 ms to import: only when a version is asked
+
     try:
         return metadata.version("coral")
     except metadata.PackageNotFoundError:

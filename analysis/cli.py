@@ -1,53 +1,121 @@
-"""``coral-check``: compile missions (or import PNML models), then verify them.
+"""``coral-check``: lint and verify CORAL missions (or PNML nets) before they run.
 
-``coral-check FILE...`` compiles and prints diagnostics;
-``coral-check verify FILE [--format text|json]`` also decides every property.
+::
 
-Exit codes: 0 clean (and, with ``verify``, every property proven); 1 errors in a mission
-or a property violated; 3 a property inconclusive (and none violated); 2 bad usage or
-an unreadable file.
+    coral-check FILE...          compile, lint and verify each file; text, json, sarif or html
+    coral-check lint FILE...     compile and lint only: fast, for pre-commit hooks
+    coral-check verify FILE      one file's verification report, and its certificate
+
+Exit codes (`analysis.outcome`): 0 no errors and every property proven; 1 errors in a
+mission (compile or lint) or a property violated; 3 a property inconclusive and none
+violated; 2 bad usage or a file that cannot be read. Over several files the worst one
+wins, in the order 2 > 1 > 3 > 0.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from analysis.lint import DEFAULT_LINK_RTT_S, LintOptions, lint
+from analysis.outcome import (
+    EXIT_ERRORS,
+    EXIT_INCONCLUSIVE,
+    EXIT_OK,
+    EXIT_USAGE,
+    FileOutcome,
+    make_outcome,
+    worst_exit_code,
+)
+from analysis.terminal import COLOR_MODES, render_footer, render_outcome, render_run, use_color
 from coral_lang.compiler import CompileResult
-from coral_lang.diagnostics import ProfileError, Severity, render_all
-from coral_lang.loading import load_net_file
+from coral_lang.diagnostics import ProfileError, render_all
+from coral_lang.loading import is_pnml, load_net_file
 from coral_lang.profile import VehicleProfile, load_profile
 
-EXIT_OK = 0
-EXIT_ERRORS = 1
-EXIT_USAGE = 2
-EXIT_INCONCLUSIVE = 3
+if TYPE_CHECKING:
+    from analysis.verify import VerifyOptions
+
+__all__ = [
+    "EXIT_ERRORS",
+    "EXIT_INCONCLUSIVE",
+    "EXIT_OK",
+    "EXIT_USAGE",
+    "build_lint_parser",
+    "build_parser",
+    "build_verify_parser",
+    "main",
+]
 
 EXIT_CODES_HELP = (
-    "exit codes: 0 clean (verify: every property proven), 1 errors in a mission or a "
-    "property violated, 2 bad usage or unreadable file, 3 a property inconclusive"
+    "exit codes: 0 clean (no errors, every property proven), 1 errors in a mission or a "
+    "property violated, 2 bad usage or unreadable file, 3 a property inconclusive (none "
+    "violated). With several files the worst wins: 2 > 1 > 3 > 0."
 )
+VERIFY_EXIT_CODES_HELP = (
+    "exit codes: 0 clean (no errors, every property proven), 1 errors in the mission or a "
+    "property violated, 2 bad usage or unreadable file, 3 a property inconclusive (none "
+    "violated)."
+)
+LINT_EXIT_CODES_HELP = (
+    "exit codes: 0 no errors (warnings allowed), 1 errors in a mission, "
+    "2 bad usage or unreadable file; with several files the worst wins (2 > 1 > 0)."
+)
+CHECK_FORMATS = ("text", "json", "sarif", "html")
+LINT_FORMATS = ("text", "json", "sarif")
+NET_LAYOUTS = ("auto", "graphviz", "builtin")
+
+
+# -- parsers --------------------------------------------------------------------------
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The command-line parser for ``coral-check FILE...`` (tests read its help text)."""
+    """The parser for ``coral-check FILE...`` (lint and verify; tests read its help)."""
     parser = argparse.ArgumentParser(
         prog="coral-check",
-        description="Check CORAL missions (.coral) and PNML nets (.pnml) before they run. "
-        "Use 'coral-check verify FILE' to prove properties as well.",
+        description="Check CORAL missions (.coral) and PNML nets (.pnml) before they run: "
+        "compile, lint, and prove boundedness, absence of deadlock, reachability of the "
+        "final markings, no dead transitions, no resource conflicts and the mission's own "
+        "assertions. Also: 'coral-check lint FILE...' (lint only, fast, for pre-commit "
+        "hooks) and 'coral-check verify FILE' (one report, with --certificate). "
+        "Formats: text for a terminal, json (docs/verify.md), sarif (SARIF 2.1.0 for code "
+        "scanning), html (one self-contained page with the net and counterexamples).",
         epilog=EXIT_CODES_HELP,
     )
     parser.add_argument(
         "files", nargs="+", metavar="FILE", help="mission (.coral) or PNML (.pnml) file"
     )
-    _add_profile_option(parser)
+    _add_profile_options(parser)
+    _add_output_options(parser, CHECK_FORMATS)
+    _add_search_options(parser)
     parser.add_argument(
-        "-q", "--quiet", action="store_true", help="print diagnostics only, no summary"
+        "--net-layout",
+        choices=NET_LAYOUTS,
+        default="auto",
+        help="how the html report lays out the net: Graphviz's dot when installed "
+        "(auto), Graphviz (graphviz), or coral's own layered layout (builtin)",
     )
+    return parser
+
+
+def build_lint_parser() -> argparse.ArgumentParser:
+    """The parser for ``coral-check lint FILE...``."""
+    parser = argparse.ArgumentParser(
+        prog="coral-check lint",
+        description="Compile and lint missions without verifying them: the fast check "
+        "for pre-commit hooks and editors. Rules and suppressions: docs/rules.md.",
+        epilog=LINT_EXIT_CODES_HELP,
+    )
+    parser.add_argument(
+        "files", nargs="+", metavar="FILE", help="mission (.coral) or PNML (.pnml) file"
+    )
+    _add_profile_options(parser)
+    _add_output_options(parser, LINT_FORMATS)
     return parser
 
 
@@ -58,15 +126,75 @@ def build_verify_parser() -> argparse.ArgumentParser:
         description="Compile a mission (or import a PNML net) and decide its properties: "
         "boundedness, deadlock, final markings, dead transitions, resource conflicts, "
         "and the mission's own assertions. Each verdict is proven, violated (with a "
-        "trace) or inconclusive (with the reason).",
-        epilog=EXIT_CODES_HELP,
+        "trace) or inconclusive (with the reason). Diagnostics go to stderr, the "
+        "report to stdout or OUT.",
+        epilog=VERIFY_EXIT_CODES_HELP,
     )
     parser.add_argument("file", metavar="FILE", help="mission (.coral) or PNML (.pnml) file")
-    _add_profile_option(parser)
+    _add_profile_options(parser)
     parser.add_argument(
         "--format", choices=("text", "json"), default="text", help="report format (default text)"
     )
     parser.add_argument("-o", "--output", metavar="OUT", help="write the report here, not stdout")
+    _add_color_option(parser)
+    _add_search_options(parser)
+    parser.add_argument(
+        "--certificate",
+        metavar="FILE",
+        help="also write the pre-mission certificate (net digest, verdicts, date) here; "
+        "the runtime runs only nets whose certificate says every property was proven",
+    )
+    return parser
+
+
+def _add_profile_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--profile",
+        action="append",
+        default=[],
+        metavar="YAML",
+        help="vehicle profile to use instead of the bundled one of that name (repeatable)",
+    )
+    parser.add_argument(
+        "--link-rtt",
+        type=_non_negative_float,
+        default=DEFAULT_LINK_RTT_S,
+        metavar="SECONDS",
+        help="worst round trip of the link to the vehicle, for the query time-out rule "
+        f"CORAL206 (default {DEFAULT_LINK_RTT_S:g})",
+    )
+
+
+def _add_output_options(parser: argparse.ArgumentParser, formats: Sequence[str]) -> None:
+    parser.add_argument(
+        "--format",
+        choices=formats,
+        default="text",
+        help=f"output format: {', '.join(formats)} (default text)",
+    )
+    parser.add_argument(
+        "-o", "--output", metavar="OUT", help="write the output here, not to stdout"
+    )
+    _add_color_option(parser)
+    parser.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="text: print only problems (diagnostics, reports that are not all proven)",
+    )
+
+
+def _add_color_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--color",
+        choices=COLOR_MODES,
+        default="auto",
+        help="colour text output: auto (only on a terminal, and not when NO_COLOR is "
+        "set), always, never",
+    )
+
+
+def _add_search_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--max-states",
         type=_positive_int,
@@ -76,7 +204,7 @@ def build_verify_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--time-limit",
-        type=float,
+        type=_positive_float,
         default=120.0,
         metavar="SECONDS",
         help="time limit of the explicit search (default 120)",
@@ -92,73 +220,85 @@ def build_verify_parser() -> argparse.ArgumentParser:
         help="skip invariants, structural boundedness and siphons/traps",
     )
     parser.add_argument("--progress", action="store_true", help="show search progress on stderr")
-    parser.add_argument(
-        "--certificate",
-        metavar="FILE",
-        help="also write the pre-mission certificate (net digest, verdicts, date) here; "
-        "the runtime runs only nets whose certificate says every property was proven",
-    )
-    return parser
-
-
-def _add_profile_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--profile",
-        action="append",
-        default=[],
-        metavar="YAML",
-        help="vehicle profile to use instead of the bundled one of that name (repeatable)",
-    )
-    parser.add_argument(
-        "--link-rtt",
-        type=float,
-        default=DEFAULT_LINK_RTT_S,
-        metavar="SECONDS",
-        help="worst round trip of the link to the vehicle, for the query time-out rule "
-        f"CORAL206 (default {DEFAULT_LINK_RTT_S:g})",
-    )
 
 
 def _positive_int(text: str) -> int:
-    value = int(text)
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: '{text}'") from None
     if value < 1:
         raise argparse.ArgumentTypeError("must be at least 1")
     return value
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run coral-check; returns the exit code."""
-    args_list = list(sys.argv[1:] if argv is None else argv)
-    if args_list and args_list[0] == "verify":
-        return _verify_main(args_list[1:])
-    parser = build_parser()
+def _number(text: str) -> float:
     try:
-        args = parser.parse_args(args_list)
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: '{text}'") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"not a finite number: '{text}'")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = _number(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError("must be more than 0")
+    return value
+
+
+def _non_negative_float(text: str) -> float:
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError("must be 0 or more")
+    return value
+
+
+# -- entry point --------------------------------------------------------------------------
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run coral-check; returns the exit code (see the module docstring).
+
+    ``coral-check lint ...`` and ``coral-check verify ...`` are subcommands; anything
+    else is a list of files to lint and verify (name a file called ``lint`` or
+    ``verify`` as ``./lint``).
+    """
+    args_list = list(sys.argv[1:] if argv is None else argv)
+    try:
+        if args_list[:1] == ["verify"]:
+            return _verify_main(args_list[1:])
+        if args_list[:1] == ["lint"]:
+            return _check_main(args_list[1:], lint_only=True)
+        return _check_main(args_list, lint_only=False)
+    except BrokenPipeError:  # the reader went away (`coral-check ... | head`)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes
+        return EXIT_USAGE
+
+
+def _parse(parser: argparse.ArgumentParser, argv: Sequence[str]) -> argparse.Namespace | int:
+    """Parsed arguments, or the exit code when argparse stopped (help: 0, misuse: 2)."""
+    try:
+        return parser.parse_args(argv)
     except SystemExit as exc:
         return EXIT_OK if exc.code == 0 else EXIT_USAGE
-    profiles = _profiles(args.profile)
-    if profiles is None:
-        return EXIT_USAGE
-    status = EXIT_OK
-    for file in args.files:
-        result = _load(file, profiles)
-        if result is None:
-            status = max(status, EXIT_USAGE)
-            continue
-        findings = lint(result, LintOptions(link_rtt_s=args.link_rtt))
-        if findings:
-            print(render_all(findings, result.sources), file=sys.stderr)
-        errors = [d for d in (*result.diagnostics, *findings) if d.severity is Severity.ERROR]
-        if errors or result.net is None:
-            status = max(status, EXIT_ERRORS)
-            if not args.quiet:
-                print(f"{file}: {len(errors)} error{'s' if len(errors) != 1 else ''}")
-        elif not args.quiet:
-            warned = (
-                f", {len(findings)} warning{'s' if len(findings) != 1 else ''}" if findings else ""
-            )
-            print(f"{file}: ok{warned}, {result.net.summary()}, digest {result.net.digest()}")
-    return status
+
+
+def _error(message: str) -> None:
+    print(f"coral-check: error: {message}", file=sys.stderr)
+
+
+def _output_folder_ok(output: str | None) -> bool:
+    if output and Path(output).is_dir():
+        _error(f"cannot write '{output}': it is a directory")
+        return False
+    if output and not Path(output).resolve().parent.is_dir():
+        _error(f"cannot write '{output}': no such folder")
+        return False
+    return True
 
 
 def _profiles(paths: list[str]) -> list[VehicleProfile] | None:
@@ -167,15 +307,155 @@ def _profiles(paths: list[str]) -> list[VehicleProfile] | None:
         try:
             profiles.append(load_profile(profile_path))
         except ProfileError as exc:
-            print(f"coral-check: error: {exc}", file=sys.stderr)
+            _error(str(exc))
             return None
     return profiles
 
 
+def _unreadable(file: str) -> str | None:
+    """Why ``file`` cannot be read as input at all (None when it can)."""
+    path = Path(file)
+    if not path.exists():
+        return "no such file"
+    if path.is_dir():
+        return "it is a directory"
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    if not is_pnml(path):  # XML declares its own encoding; the PNML reader checks it
+        try:
+            data.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            return f"not UTF-8 text ({exc.reason} at byte {exc.start})"
+    return None
+
+
+def _write(text: str, output: str | None) -> bool:
+    if not output:
+        sys.stdout.write(text)
+        return True
+    try:
+        Path(output).write_text(text, encoding="utf-8")
+    except OSError as exc:
+        _error(f"cannot write '{output}': {exc.strerror}")
+        return False
+    return True
+
+
+def _verify_options(args: argparse.Namespace, structural: bool) -> VerifyOptions:
+    from analysis.progress import ProgressPrinter
+    from analysis.verify import VerifyOptions
+
+    return VerifyOptions(
+        max_states=args.max_states,
+        time_limit=args.time_limit,
+        por=args.por,
+        structural=structural and not args.no_structure,
+        progress=ProgressPrinter(sys.stderr, force=True) if args.progress else None,
+    )
+
+
+# -- coral-check FILE... and coral-check lint FILE... --------------------------------------
+
+
+def _check_main(argv: Sequence[str], lint_only: bool) -> int:
+    parser = build_lint_parser() if lint_only else build_parser()
+    args = _parse(parser, argv)
+    if isinstance(args, int):
+        return args
+    if not _output_folder_ok(args.output):
+        return EXIT_USAGE
+    profiles = _profiles(args.profile)
+    if profiles is None:
+        return EXIT_USAGE
+    # The structural facts (invariants, siphons...) appear in JSON and HTML only.
+    options = None if lint_only else _verify_options(args, args.format in ("json", "html"))
+    lint_options = LintOptions(link_rtt_s=args.link_rtt)
+    streaming = args.format == "text" and not args.output
+    color = use_color(args.color, sys.stdout, os.environ) if streaming else args.color == "always"
+    outcomes: list[FileOutcome] = []
+    printed = False
+    for file in args.files:
+        outcome = _check_file(file, profiles, lint_options, options)
+        outcomes.append(outcome)
+        if streaming:  # a terminal sees each file as soon as it is done
+            block = render_outcome(outcome, lint_only=lint_only, color=color, quiet=args.quiet)
+            if block:
+                sys.stdout.write(("\n" if printed else "") + block + "\n")
+                sys.stdout.flush()
+                printed = True
+    if streaming:
+        footer = render_footer(outcomes, args.quiet)
+        if footer:
+            sys.stdout.write(("\n" if printed else "") + footer + "\n")
+    elif not _write(_render(outcomes, args, lint_only, color), args.output):
+        return EXIT_USAGE
+    return worst_exit_code(o.exit_code() for o in outcomes)
+
+
+def _check_file(
+    file: str,
+    profiles: list[VehicleProfile],
+    lint_options: LintOptions,
+    options: VerifyOptions | None,
+) -> FileOutcome:
+    """Compile (or import), verify unless ``options`` is None, and lint one file."""
+    problem = _unreadable(file)
+    if problem is not None:
+        _error(f"cannot read '{file}': {problem}")
+        return FileOutcome(path=file, input_error=problem)
+    result = load_net_file(Path(file), profiles)
+    if result.net is None or result.errors:
+        return make_outcome(file, result.diagnostics, sources=result.sources)
+    if options is None:
+        findings = lint(result, lint_options)
+        return make_outcome(
+            file, [*result.diagnostics, *findings], net=result.net, sources=result.sources
+        )
+    from analysis.verify import run_verification
+
+    verification = run_verification(result.net, options)
+    # One exploration serves both: lint's race rule reads the verifier's state space.
+    findings = lint(result, lint_options, verification.space)
+    return make_outcome(
+        file,
+        [*result.diagnostics, *findings],
+        report=verification.report,
+        net=result.net,
+        sources=result.sources,
+    )
+
+
+def _render(
+    outcomes: list[FileOutcome], args: argparse.Namespace, lint_only: bool, color: bool
+) -> str:
+    if args.format == "text":
+        return render_run(outcomes, lint_only=lint_only, color=color, quiet=args.quiet)
+    from analysis.certificate import tool_version
+
+    if args.format == "json":
+        from analysis.outcome import to_json_document
+
+        document = to_json_document(outcomes, "lint" if lint_only else "check", tool_version())
+        return json.dumps(document, indent=2) + "\n"
+    if args.format == "sarif":
+        from analysis.sarif import to_sarif
+
+        return json.dumps(to_sarif(outcomes, tool_version=tool_version()), indent=2) + "\n"
+    from analysis.html_report import render_html
+
+    return render_html(outcomes, layout=args.net_layout, tool_version=tool_version())
+
+
+# -- coral-check verify FILE -----------------------------------------------------------
+
+
 def _load(file: str, profiles: list[VehicleProfile]) -> CompileResult | None:
     """Compile or import ``file``, printing diagnostics; None if it cannot be read."""
-    if not Path(file).is_file():
-        print(f"coral-check: error: cannot read '{file}': no such file", file=sys.stderr)
+    problem = _unreadable(file)
+    if problem is not None:
+        _error(f"cannot read '{file}': {problem}")
         return None
     result = load_net_file(Path(file), profiles)
     if result.diagnostics:
@@ -184,17 +464,12 @@ def _load(file: str, profiles: list[VehicleProfile]) -> CompileResult | None:
 
 
 def _verify_main(argv: list[str]) -> int:
-    from analysis.certificate import make_certificate, write_certificate
-    from analysis.progress import ProgressPrinter
-    from analysis.verify import VerifyOptions, verify
+    from analysis.verify import run_verification
 
-    parser = build_verify_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:
-        return EXIT_OK if exc.code == 0 else EXIT_USAGE
-    if args.output and not Path(args.output).resolve().parent.is_dir():
-        print(f"coral-check: error: cannot write '{args.output}': no such folder", file=sys.stderr)
+    args = _parse(build_verify_parser(), argv)
+    if isinstance(args, int):
+        return args
+    if not _output_folder_ok(args.output):
         return EXIT_USAGE
     profiles = _profiles(args.profile)
     if profiles is None:
@@ -205,40 +480,31 @@ def _verify_main(argv: list[str]) -> int:
     if result.net is None or result.errors:
         print(f"{args.file}: not verified: fix the errors above first", file=sys.stderr)
         return EXIT_ERRORS
-    findings = lint(result, LintOptions(link_rtt_s=args.link_rtt))
+    options = _verify_options(args, structural=True)
+    verification = run_verification(result.net, options)
+    findings = lint(result, LintOptions(link_rtt_s=args.link_rtt), verification.space)
     if findings:
         print(render_all(findings, result.sources), file=sys.stderr)
-    options = VerifyOptions(
-        max_states=args.max_states,
-        time_limit=args.time_limit,
-        por=args.por,
-        structural=not args.no_structure,
-        progress=ProgressPrinter(sys.stderr, force=True) if args.progress else None,
-    )
-    report = verify(result.net, options)
+    report = verification.report
     if args.format == "json":
         text = json.dumps(report.to_dict(), indent=2) + "\n"
     else:
-        text = report.render_text(color=not args.output and sys.stdout.isatty()) + "\n"
+        color = (
+            use_color(args.color, sys.stdout, os.environ)
+            if not args.output
+            else args.color == "always"
+        )
+        text = report.render_text(color=color) + "\n"
     if args.certificate:
+        from analysis.certificate import make_certificate, write_certificate
+
         try:
             write_certificate(make_certificate(report, options), args.certificate)
         except OSError as exc:
-            print(
-                f"coral-check: error: cannot write '{args.certificate}': {exc.strerror}",
-                file=sys.stderr,
-            )
+            _error(f"cannot write '{args.certificate}': {exc.strerror}")
             return EXIT_USAGE
-    if args.output:
-        try:
-            Path(args.output).write_text(text, encoding="utf-8")
-        except OSError as exc:
-            print(
-                f"coral-check: error: cannot write '{args.output}': {exc.strerror}", file=sys.stderr
-            )
-            return EXIT_USAGE
-    else:
-        sys.stdout.write(text)
+    if not _write(text, args.output):
+        return EXIT_USAGE
     return report.exit_code()
 
 

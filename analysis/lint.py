@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from analysis.statespace import explore
+from analysis.statespace import StateSpace, explore
 from coral_lang import ast
 from coral_lang.compiler import CompileResult
 from coral_lang.diagnostics import Diagnostic, Severity, Span
@@ -84,10 +84,25 @@ class LintOptions:
     time_limit: float = 10.0
 
 
-def lint(result: CompileResult, options: LintOptions | None = None) -> list[Diagnostic]:
+def lint(
+    result: CompileResult,
+    options: LintOptions | None = None,
+    space: StateSpace | None = None,
+) -> list[Diagnostic]:
     """The lint findings of a compiled mission, suppressions applied, in source order.
 
-    Returns an empty list for a mission that did not compile (its errors come first).
+    Args:
+        result: The compiled mission.
+        options: Rule settings.
+        space: The reachable state space of ``result.net`` if the caller has already
+            explored it (``coral-check`` verifies first). CORAL207 reads it instead of
+            exploring again when it is unreduced and holds every state its own search
+            would reach (it is complete, or has ``options.max_states`` states or more):
+            both searches are breadth-first in one fixed order, so nothing is missed.
+
+    Returns:
+        The findings; an empty list for a mission that did not compile (its errors come
+        first).
     """
     options = options or LintOptions()
     if result.net is None or not result.missions:
@@ -97,7 +112,7 @@ def lint(result: CompileResult, options: LintOptions | None = None) -> list[Diag
         *_unused_constants(result),
         *_place_usage(result.net),
         *_short_time_outs(result.net, result.profile, options),
-        *_unprioritised_conflicts(result.net, options),
+        *_unprioritised_conflicts(result.net, options, space),
     ]
     kept, suppression_findings = _apply_suppressions(findings, result.sources)
     return sorted([*kept, *suppression_findings], key=_order)
@@ -247,7 +262,9 @@ def _short_time_outs(
             )
 
 
-def _unprioritised_conflicts(net: Net, options: LintOptions) -> Iterator[Diagnostic]:
+def _unprioritised_conflicts(
+    net: Net, options: LintOptions, given: StateSpace | None
+) -> Iterator[Diagnostic]:
     """Pairs of engine transitions (not vehicle replies) with equal priority that are both
     enabled in some reachable marking while their shared input places cannot feed both:
     the engine's choice between them then rests on source order alone."""
@@ -263,7 +280,9 @@ def _unprioritised_conflicts(net: Net, options: LintOptions) -> Iterator[Diagnos
                 pairs.append((a, b, shared))
     if not pairs:
         return
-    space = explore(net, max_states=options.max_states, time_limit=options.time_limit)
+    space = given
+    if space is None or space.reduced or not (space.complete or space.states >= options.max_states):
+        space = explore(net, max_states=options.max_states, time_limit=options.time_limit)
     found: dict[int, int] = {}  # pair number -> first state where the two race
     # One pass over the stored markings, all pairs per block: unpacking markings is the
     # expensive part, so it must not be repeated per pair.

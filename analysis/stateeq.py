@@ -25,14 +25,15 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Literal
-
-import z3
+from typing import TYPE_CHECKING, ClassVar, Literal
 
 from analysis.invariants import InvariantBasis
 from analysis.siphons import maximal_trap
 from analysis.structural import DEFAULT_TIMEOUT_MS, incidence
 from coral_lang.net import Net
+
+if TYPE_CHECKING:
+    import z3  # imported where a query runs: it takes about 50 ms to load
 
 Marking = tuple[int, ...]
 Clock = Callable[[], float]
@@ -264,6 +265,8 @@ def check_unreachable(
         `Proven` (unsat: no bad marking is reachable), `Candidate` (a solution that
         still needs confirming), or `Unknown` (z3 gave up or a limit was hit).
     """
+    import z3
+
     if invariants is not None and invariants.kind != "P":
         raise ValueError("the state equation is strengthened with P-invariants only")
     start = clock()
@@ -339,6 +342,8 @@ def _equation(
     net: Net, bad: BadMarkings, invariants: InvariantBasis | None, timeout_ms: int
 ) -> tuple[z3.Solver, list[z3.ArithRef], list[z3.ArithRef]]:
     """The solver with M = M0 + C x, x >= 0, M >= 0, invariants and the bad set."""
+    import z3
+
     rows = incidence(net).rows()
     m0 = net.initial_marking()
     counts = [z3.Int(f"x_{t}") for t in range(len(net.transitions))]

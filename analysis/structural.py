@@ -20,12 +20,15 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
-import z3
 
 from coral_lang.net import Net
+
+if TYPE_CHECKING:
+    import z3  # imported where a query runs: it takes about 50 ms to load
 
 IntMatrix = npt.NDArray[np.int64]
 
@@ -215,6 +218,8 @@ class StructuralBoundedness:
 
 def _to_fraction(value: z3.ExprRef) -> Fraction:
     """An exact rational from a z3 model value (reals are rational in LRA)."""
+    import z3
+
     simplified = z3.simplify(value)
     if z3.is_rational_value(simplified):
         return Fraction(simplified.numerator_as_long(), simplified.denominator_as_long())
@@ -250,6 +255,8 @@ def structural_boundedness(
     Returns:
         A `StructuralBoundedness`; ``structurally_bounded`` is None on timeout.
     """
+    import z3
+
     rows = incidence(net).rows()
     names = net.place_names
     m0 = net.initial_marking()
@@ -318,6 +325,8 @@ def _place_bound(
 ) -> int | str | None:
     """floor(min y·M0 s.t. y >= 0, y(place) = 1, y^T C <= 0); None if infeasible,
     a reason string if z3 gave up."""
+    import z3
+
     opt = z3.Optimize()
     opt.set("timeout", timeout_ms)
     opt.add(*[v >= 0 for v in y], y[place] == 1, *columns)

@@ -24,11 +24,12 @@ import itertools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
-from analysis import stateeq
 from analysis.coverability import coverability
 from analysis.progress import ProgressCallback
 from analysis.report import (
@@ -42,6 +43,11 @@ from analysis.report import (
 from analysis.statespace import StateSpace, explore
 from coral_lang.diagnostics import Span
 from coral_lang.net import AssertKind, Net, PlaceKind, format_tokens
+
+if TYPE_CHECKING:
+    # Imported where the state equation runs: with the invariants and siphons it needs,
+    # it costs tens of milliseconds that a completely explored net never has to pay.
+    from analysis import stateeq
 
 Markings = npt.NDArray[np.int64]
 Predicate = Callable[[Markings], npt.NDArray[np.bool_]]
@@ -88,11 +94,32 @@ class VerifyOptions:
 
 def verify(net: Net, options: VerifyOptions | None = None) -> Report:
     """Decide every property of ``net``; see the module docstring for the methods."""
+    return run_verification(net, options).report
+
+
+@dataclass(frozen=True)
+class Verification:
+    """A report together with the state space it was decided on.
+
+    Attributes:
+        report: The verdicts.
+        space: The explicit state space the verdicts were read from (None when the net
+            was too large to encode). ``coral-check`` hands it to `analysis.lint`, so the
+            reachable markings are explored once per run, not once per tool. It can be
+            large: drop it once it has been used.
+    """
+
+    report: Report
+    space: StateSpace | None
+
+
+def run_verification(net: Net, options: VerifyOptions | None = None) -> Verification:
+    """`verify`, keeping the explored state space for callers that look further."""
     options = options or VerifyOptions()
     started = time.perf_counter()
     cells = len(net.places) * len(net.transitions)
     if cells > DENSE_CELL_LIMIT:
-        return _too_large(net, cells, time.perf_counter() - started)
+        return Verification(_too_large(net, cells, time.perf_counter() - started), None)
     checker = _Checker(net, options)
     properties = [
         checker.bounded(),
@@ -104,7 +131,7 @@ def verify(net: Net, options: VerifyOptions | None = None) -> Report:
         *checker.assertions(),
     ]
     structure = checker.structure() if options.structural else {}
-    return Report(
+    report = Report(
         net_name=net.name,
         digest=net.digest(),
         sources=net.sources,
@@ -113,6 +140,7 @@ def verify(net: Net, options: VerifyOptions | None = None) -> Report:
         structure=structure,
         seconds=time.perf_counter() - started,
     )
+    return Verification(report, checker.space)
 
 
 def _too_large(net: Net, cells: int, seconds: float) -> Report:
@@ -214,12 +242,13 @@ class _Checker:
         key: str,
         title: str,
         predicate: Predicate,
-        bad: stateeq.BadMarkings,
+        bad: Callable[[], stateeq.BadMarkings],
         location: Span | None = None,
         found_detail: str = "",
     ) -> PropertyResult:
         """A safety property: violated if search finds a bad marking, proven if the
-        search was exhaustive or the state equation excludes bad markings."""
+        search was exhaustive or the state equation excludes bad markings (``bad``
+        builds them, only when the state equation is needed)."""
         hit = self.space.find(predicate)
         if hit is not None:
             depth = self.space.depth_of(hit)
@@ -243,7 +272,9 @@ class _Checker:
                 None,
                 location,
             )
-        result, evidence = self._state_equation(bad)
+        from analysis import stateeq
+
+        result, evidence = self._state_equation(bad())
         if isinstance(result, stateeq.Proven):
             return PropertyResult(
                 key, title, Verdict.PROVEN, result.method, result.explain(), None, location
@@ -273,6 +304,8 @@ class _Checker:
     ) -> tuple[stateeq.StateEquationResult, Evidence | None]:
         """Run the state equation; a Candidate is confirmed only if some firing order of
         its counts replays on the net and ends in a bad marking (then it is real)."""
+        from analysis import stateeq
+
         result = stateeq.check_unreachable(
             self.net, bad, timeout_ms=self.options.z3_timeout_ms, time_limit=time_limit
         )
@@ -388,6 +421,8 @@ class _Checker:
                 f"all {self.space.states} reachable states explored; "
                 f"{ends} dead marking(s), all declared final",
             )
+        from analysis import stateeq
+
         result, evidence = self._state_equation(stateeq.unexpected_deadlocks(net))
         if isinstance(result, stateeq.Proven):
             return PropertyResult(
@@ -581,6 +616,8 @@ class _Checker:
                     f"in all {self.space.states} reachable states",
                 )
             ]
+        from analysis import stateeq
+
         unproven = []
         for a, b in pairs:
             result = stateeq.check_unreachable(
@@ -635,16 +672,14 @@ class _Checker:
                     hit &= block[:, i] >= w
                 return hit
 
-            constraints = tuple(
-                stateeq.PlaceConstraint(((p, 1),), ">=", w) for p, w in assertion.places
-            )
+            covering = partial(_covering, assertion.places, title)
             if assertion.kind is AssertKind.NEVER:
                 results.append(
                     self._search_then_prove(
                         key,
                         title,
                         covers,
-                        stateeq.BadMarkings(constraints=constraints, label=title),
+                        covering,
                         assertion.span,
                     )
                 )
@@ -663,12 +698,12 @@ class _Checker:
                         key,
                         title,
                         above,
-                        stateeq.above_bound([p for p, _ in assertion.places], bound),
+                        partial(_above, tuple(p for p, _ in assertion.places), bound),
                         assertion.span,
                     )
                 )
             else:
-                results.append(self._reachable(key, title, covers, constraints, assertion.span))
+                results.append(self._reachable(key, title, covers, covering, assertion.span))
         return results
 
     def _reachable(
@@ -676,7 +711,7 @@ class _Checker:
         key: str,
         title: str,
         predicate: Predicate,
-        constraints: tuple[stateeq.PlaceConstraint, ...],
+        wanted: Callable[[], stateeq.BadMarkings],
         location: Span | None,
     ) -> PropertyResult:
         hit = self.space.find(predicate)
@@ -700,9 +735,9 @@ class _Checker:
                 None,
                 location,
             )
-        result, evidence = self._state_equation(
-            stateeq.BadMarkings(constraints=constraints, label=title)
-        )
+        from analysis import stateeq
+
+        result, evidence = self._state_equation(wanted())
         if evidence is not None:
             return PropertyResult(
                 key,
@@ -758,16 +793,40 @@ class _Checker:
             "covered_by_p_invariants": invariants.covered_by_p,
             "consistent": invariants.consistent,
         }
-        bounded = structural_boundedness(
-            net,
-            timeout_ms=self.options.z3_timeout_ms,
-            per_place=False,
-            time_limit=STRUCTURE_SECONDS,
-        )
-        facts["structural_boundedness"] = {
-            "verdict": bounded.structurally_bounded,
-            "summary": bounded.explain(),
-        }
+        if invariants.covered_by_p:
+            # The sum of the covering invariants is a weighting y > 0 with y^T C = 0:
+            # the linear program (and loading z3 for it) would only say so again.
+            facts["structural_boundedness"] = {
+                "verdict": True,
+                "summary": "structurally bounded: the P-invariants cover every place, so "
+                "their sum is a positive weighting y with y^T C = 0",
+            }
+        else:
+            bounded = structural_boundedness(
+                net,
+                timeout_ms=self.options.z3_timeout_ms,
+                per_place=False,
+                time_limit=STRUCTURE_SECONDS,
+            )
+            facts["structural_boundedness"] = {
+                "verdict": bounded.structurally_bounded,
+                "summary": bounded.explain(),
+            }
         siphons = siphon_trap_check(net, time_limit=STRUCTURE_SECONDS)
         facts["siphons_traps"] = {"summary": siphons.explain()}
         return facts
+
+
+def _covering(places: tuple[tuple[str, int], ...], label: str) -> stateeq.BadMarkings:
+    """Markings with at least these tokens, for the state equation."""
+    from analysis import stateeq
+
+    constraints = tuple(stateeq.PlaceConstraint(((p, 1),), ">=", w) for p, w in places)
+    return stateeq.BadMarkings(constraints=constraints, label=label)
+
+
+def _above(places: tuple[str, ...], bound: int) -> stateeq.BadMarkings:
+    """Markings with more than ``bound`` tokens in ``places`` together."""
+    from analysis import stateeq
+
+    return stateeq.above_bound(list(places), bound)

@@ -7,7 +7,12 @@ Typical use::
     if not result.ok:
         print(render_all(result.diagnostics, result.sources))
     net = result.net
+
+The PNML functions (`read_pnml`, `parse_pnml`, `to_pnml`, `write_pnml`) load their XML
+machinery on first use, so tools that never touch PNML start faster.
 """
+
+from typing import TYPE_CHECKING
 
 from coral_lang.compiler import CompileResult, compile_file, compile_mission, compile_source
 from coral_lang.diagnostics import (
@@ -35,7 +40,6 @@ from coral_lang.net import (
     TransitionKind,
 )
 from coral_lang.parser import parse
-from coral_lang.pnml import parse_pnml, read_pnml, to_pnml, write_pnml
 from coral_lang.printer import format_mission
 from coral_lang.profile import (
     CommandSpec,
@@ -46,6 +50,24 @@ from coral_lang.profile import (
     load_profile,
     parse_profile,
 )
+
+if TYPE_CHECKING:
+    from coral_lang.pnml import parse_pnml, read_pnml, to_pnml, write_pnml
+
+_LAZY = {"parse_pnml", "read_pnml", "to_pnml", "write_pnml"}
+
+
+def __getattr__(name: str) -> object:
+    """The PNML names, imported from `coral_lang.pnml` when first asked for: its XML
+    parser and writer take about 50 ms to load."""
+    if name in _LAZY:
+        from coral_lang import pnml
+
+        value: object = getattr(pnml, name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'coral_lang' has no attribute {name!r}")
+
 
 __all__ = [
     "AssertKind",

@@ -1,45 +1,148 @@
-"""coral-check as a function: help text, exit codes, diagnostics on stderr."""
+"""coral-check as a function: help texts, every exit code, formats, colour, start-up cost."""
 
 from __future__ import annotations
 
+import json
+import os
+import pty
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
-from analysis.cli import build_parser, main
-from tests.conftest import EXAMPLES
+from analysis.cli import build_lint_parser, build_parser, build_verify_parser, main
+from analysis.outcome import JSON_SCHEMA_VERSION, worst_exit_code
+from tests.conftest import EXAMPLES, REPO
 
 POOL = str(EXAMPLES / "pool_mission" / "pool_mission.coral")
+FAULTY = EXAMPLES / "faulty"
+DEADLOCK = str(FAULTY / "deadlock.coral")
+UNHANDLED = str(FAULTY / "unhandled_reply.coral")
+
+# Ten steps to the only final marking: with a budget of 3 states the search cannot
+# reach it, and nothing else decides reachability, so the verdict is inconclusive.
+CHAIN = (
+    "mission chain\nvehicle ROMEO\n"
+    "place p0 = 1, p1, p2, p3, p4, p5, p6, p7, p8, p9, p10\nfinal { p10 }\n"
+    + "".join(f"transition t{i} wait {{ p{i} }} signal {{ p{i + 1} }}\n" for i in range(10))
+)
 
 
-def test_help_names_the_exit_codes(capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.fixture
+def chain(tmp_path: Path) -> str:
+    path = tmp_path / "chain.coral"
+    path.write_text(CHAIN)
+    return str(path)
+
+
+# -- help -------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def wide(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Help text on one line per paragraph (argparse wraps at the terminal's width)."""
+    monkeypatch.setenv("COLUMNS", "1000")
+
+
+@pytest.mark.usefixtures("wide")
+def test_help_names_formats_subcommands_and_exit_codes(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--help"]) == 0
     out = capsys.readouterr().out
-    assert "usage: coral-check" in out and "exit codes: 0 clean" in out
+    assert out.startswith("usage: coral-check [-h]")
+    for text in (
+        "coral-check lint FILE",
+        "coral-check verify FILE",
+        "--format {text,json,sarif,html}",
+    ):
+        assert text in out
+    assert "--color {auto,always,never}" in out and "NO_COLOR" in out
+    assert "exit codes: 0 clean" in out and "2 > 1 > 3 > 0" in out
     assert build_parser().prog == "coral-check"
 
 
-def test_clean_mission_exits_0_and_prints_summary(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main([POOL]) == 0
+@pytest.mark.usefixtures("wide")
+def test_lint_help_and_verify_help(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["lint", "--help"]) == 0
     out = capsys.readouterr().out
-    assert "ok, net 'pool_mission'" in out and "digest sha256:" in out
+    assert out.startswith("usage: coral-check lint") and "pre-commit" in out
+    assert "--format {text,json,sarif}" in out and "2 > 1 > 0" in out
+    assert main(["verify", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: coral-check verify") and "--certificate FILE" in out
+    assert "--color {auto,always,never}" in out
+    assert build_lint_parser().prog == "coral-check lint"
+    assert build_verify_parser().prog == "coral-check verify"
 
 
-def test_mission_with_errors_exits_1_and_prints_diagnostics(
+# -- exit codes -------------------------------------------------------------------------
+
+
+def test_clean_mission_exits_0_with_verdicts_and_summary(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    assert main([str(EXAMPLES / "faulty" / "unhandled_reply.coral")]) == 1
-    err = capsys.readouterr().err
-    assert "unhandled_reply.coral:20:20: error:" in err and "[CORAL106]" in err and "^~~~~~" in err
+    assert main([POOL]) == 0
+    captured = capsys.readouterr()
+    assert "net 'pool_mission'  sha256:" in captured.out
+    assert re.search(r"^PROVEN +: 9 proven, 0 violated, 0 inconclusive$", captured.out, re.M)
+    assert captured.out.rstrip().endswith("pool_mission.coral: proven, 0 warnings")
+    assert captured.err == ""
 
 
-def test_missing_file_and_bad_usage_exit_2(
+def test_violated_property_exits_1_with_the_trace(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([DEADLOCK]) == 1
+    out = capsys.readouterr().out
+    assert "VIOLATED" in out and "set_depth: DEPTH replied error" in out
+    assert "deadlock.coral:25" in out and out.rstrip().endswith(
+        "deadlock.coral: violated, 0 warnings"
+    )
+
+
+def test_compile_errors_exit_1_with_diagnostics_and_no_verification(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main([UNHANDLED]) == 1
+    out = capsys.readouterr().out
+    assert "unhandled_reply.coral:20:20: error:" in out and "[CORAL106]" in out and "^~~~~~" in out
+    assert "1 error; not verified" in out and "PROVEN" not in out
+
+
+def test_inconclusive_exits_3(chain: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([chain, "--max-states", "3"]) == 3
+    assert "INCONCLUSIVE" in capsys.readouterr().out
+    assert main([chain]) == 0
+
+
+def test_unreadable_input_and_bad_usage_exit_2(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     assert main([str(tmp_path / "nope.coral")]) == 2
-    assert "cannot read" in capsys.readouterr().err
-    assert main([]) == 2
-    assert main(["--no-such-flag", POOL]) == 2
+    assert "coral-check: error: cannot read" in capsys.readouterr().err
+    assert main([str(tmp_path)]) == 2
+    assert "it is a directory" in capsys.readouterr().err
+    latin = tmp_path / "latin.coral"
+    latin.write_bytes(b"mission caf\xe9\n")
+    assert main([str(latin)]) == 2
+    assert "not UTF-8 text (invalid continuation byte at byte 11)" in capsys.readouterr().err
+    for bad in (
+        [],
+        ["--no-such-flag", POOL],
+        ["--format", "xml", POOL],
+        ["--max-states", "0", POOL],
+        ["--time-limit", "soon", POOL],
+        ["--link-rtt", "-1", POOL],
+        ["--color", "sometimes", POOL],
+        ["-o", str(tmp_path / "no" / "such" / "dir.json"), POOL],
+        ["-o", str(tmp_path), POOL],
+        ["lint", "--format", "html", POOL],
+        ["lint"],
+    ):
+        assert main(bad) == 2, bad
+    err = capsys.readouterr().err
+    assert "invalid choice: 'xml'" in err and "not a number: 'soon'" in err
+    assert "must be 0 or more" in err and "no such folder" in err and "it is a directory" in err
+    assert "Traceback" not in err
 
 
 def test_bad_profile_exits_2_naming_the_field(
@@ -51,6 +154,174 @@ def test_bad_profile_exits_2_naming_the_field(
     assert "commands.DEPTH.kind" in capsys.readouterr().err
 
 
-def test_worst_exit_code_wins_over_several_files(tmp_path: Path) -> None:
-    assert main([POOL, str(EXAMPLES / "faulty" / "unhandled_reply.coral")]) == 1
-    assert main([POOL, str(tmp_path / "missing.coral")]) == 2
+def test_worst_exit_code_wins_in_the_order_2_1_3_0(chain: str, tmp_path: Path) -> None:
+    missing = str(tmp_path / "missing.coral")
+    assert main([POOL, UNHANDLED]) == 1
+    assert main([POOL, missing]) == 2
+    assert main([chain, DEADLOCK, "--max-states", "3"]) == 1
+    assert main([POOL, chain, "--max-states", "3"]) == 3
+    assert main([DEADLOCK, missing, chain, "--max-states", "3"]) == 2
+    assert worst_exit_code([]) == 0
+    for codes, worst in (([0, 3], 3), ([3, 1], 1), ([1, 2, 3], 2), ([0, 0], 0)):
+        assert worst_exit_code(codes) == worst == worst_exit_code(reversed(codes))
+
+
+# -- lint only --------------------------------------------------------------------------
+
+
+def test_lint_subcommand_lints_without_verifying(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["lint", str(FAULTY / "dead_transition.coral"), POOL]) == 0
+    out = capsys.readouterr().out
+    assert "[CORAL204]" in out and "dead_transition.coral: ok, 2 warnings" in out
+    assert "ok, net 'pool_mission'" in out and "digest sha256:" in out
+    assert "VIOLATED" not in out and "PROVEN" not in out and "2 files: 2 clean" in out
+    assert main(["lint", UNHANDLED]) == 1
+    assert main(["lint", "-q", POOL]) == 0
+    assert capsys.readouterr().out.endswith("unhandled_reply.coral: 1 error\n")
+
+
+def test_lint_subcommand_json(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["lint", "--format", "json", str(FAULTY / "dead_transition.coral")]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["command"] == "lint" and data["files"][0]["report"] is None
+    assert data["files"][0]["status"] == "clean"
+    assert {d["code"] for d in data["files"][0]["diagnostics"]} == {"CORAL204", "CORAL205"}
+
+
+# -- JSON -------------------------------------------------------------------------------
+
+
+def test_json_document_is_one_versioned_object_per_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "run.json"
+    missing = str(tmp_path / "missing.coral")
+    files = [POOL, str(FAULTY / "dead_transition.coral"), UNHANDLED, missing]
+    assert main([*files, "--format", "json", "-o", str(out)]) == 2
+    assert capsys.readouterr().out == ""
+    data = json.loads(out.read_text())
+    assert data["schema"] == "coral-check" and data["schema_version"] == JSON_SCHEMA_VERSION == 1
+    assert data["tool"]["name"] == "coral-check" and data["tool"]["version"]
+    assert data["command"] == "check" and data["exit_code"] == 2
+    assert [f["file"] for f in data["files"]] == files
+    assert [f["status"] for f in data["files"]] == ["proven", "violated", "errors", "unreadable"]
+    assert [f["exit_code"] for f in data["files"]] == [0, 1, 1, 2]
+    pool, dead, unhandled, unread = data["files"]
+    assert pool["report"]["verdict"] == "proven" and pool["report"]["format"] == 1
+    assert pool["report"]["structure"]["invariants"]["p_invariants"]
+    warning = dead["diagnostics"][1]
+    assert warning == {
+        "code": "CORAL204",
+        "severity": "warning",
+        "file": str(FAULTY / "dead_transition.coral"),
+        "line": 10,
+        "col": 14,
+        "end_line": 10,
+        "end_col": 28,
+        "message": warning["message"],
+        "notes": [warning["notes"][0]],
+    }
+    assert dead["report"]["deadlock"]["verdict"] == "violated"
+    assert unhandled["report"] is None and unhandled["diagnostics"][0]["code"] == "CORAL106"
+    assert unread["error"] == "no such file" and unread["diagnostics"] == []
+
+
+# -- colour -----------------------------------------------------------------------------
+
+
+def test_colour_only_when_asked_in_a_pipe(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([DEADLOCK]) == 1
+    assert "\033[" not in capsys.readouterr().out
+    assert main([DEADLOCK, "--color", "always"]) == 1
+    out = capsys.readouterr().out
+    assert "\033[31mVIOLATED" in out and "\033[0m" in out
+    assert main([DEADLOCK, "--color", "never"]) == 1
+    assert "\033[" not in capsys.readouterr().out
+
+
+def _run_in_a_terminal(args: list[str], env: dict[str, str]) -> str:
+    """coral-check's stdout when it is a terminal (a pseudo-terminal here)."""
+    controller, terminal = pty.openpty()
+    try:
+        completed = subprocess.run(
+            [sys.executable, "-m", "analysis.cli", *args],
+            stdout=terminal,
+            stderr=subprocess.DEVNULL,
+            cwd=REPO,
+            env=env,
+            timeout=120,
+            check=False,
+        )
+    finally:
+        os.close(terminal)
+    chunks = []
+    while True:
+        try:
+            chunk = os.read(controller, 65536)
+        except OSError:  # the terminal side is closed and everything was read
+            break
+        if not chunk:
+            break
+        chunks.append(chunk)
+    os.close(controller)
+    assert completed.returncode == 1
+    return b"".join(chunks).decode()
+
+
+def test_colour_on_a_terminal_unless_no_color() -> None:
+    env = {k: v for k, v in os.environ.items() if k not in ("NO_COLOR", "TERM")}
+    env["TERM"] = "xterm"
+    assert "\033[31mVIOLATED" in _run_in_a_terminal([DEADLOCK], env)
+    assert "\033[" not in _run_in_a_terminal([DEADLOCK], {**env, "NO_COLOR": "1"})
+    assert "\033[" in _run_in_a_terminal([DEADLOCK, "--color", "always"], {**env, "NO_COLOR": "1"})
+
+
+# -- verify subcommand ------------------------------------------------------------------
+
+
+def test_verify_subcommand_keeps_its_report_and_lints_on_stderr(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    report, cert = tmp_path / "r.txt", tmp_path / "c.json"
+    path = str(FAULTY / "dead_transition.coral")
+    assert main(["verify", path, "-o", str(report), "--certificate", str(cert)]) == 1
+    assert "[CORAL204]" in capsys.readouterr().err
+    assert report.read_text().startswith("net 'faulty_dead_transition'")
+    assert json.loads(cert.read_text())["verdict"] == "violated"
+    assert main(["verify", path, "--color", "always"]) == 1
+    assert "\033[31mVIOLATED" in capsys.readouterr().out
+
+
+# -- start-up cost ----------------------------------------------------------------------
+
+
+def test_heavy_modules_load_only_when_needed() -> None:
+    """z3, the PNML reader (XML) and matplotlib stay out of a lint-and-verify run of a
+    mission: they cost start-up time that a pre-commit hook pays on every commit."""
+    code = (
+        "import sys\n"
+        "from analysis.cli import main\n"
+        f"code = main([{POOL!r}, '--format', 'json', '-o', '/dev/null'])\n"
+        "heavy = [m for m in ('z3', 'coral_lang.pnml', 'xml.sax', 'matplotlib', 'networkx')"
+        " if m in sys.modules]\n"
+        "print(code, heavy)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True
+    ).stdout
+    assert out.strip() == "0 []"
+
+
+def test_a_closed_pipe_ends_quietly() -> None:
+    """`coral-check ... | head -1`: no traceback when the reader goes away."""
+    with subprocess.Popen(
+        [sys.executable, "-m", "analysis.cli", DEADLOCK, POOL, POOL, POOL],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=REPO,
+    ) as process:
+        assert process.stdout is not None and process.stderr is not None
+        process.stdout.readline()
+        process.stdout.close()
+        err = process.stderr.read().decode()
+    assert process.returncode == 2 and "Traceback" not in err

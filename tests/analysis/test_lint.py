@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import re
+from typing import Any
 
 import pytest
 
+from analysis import statespace
 from analysis.cli import main
 from analysis.lint import RULES, LintOptions, lint
+from analysis.verify import VerifyOptions, run_verification
 from coral_lang import compile_file, compile_source, parse_profile
 from tests.conftest import EXAMPLES, REPO
 
@@ -109,9 +112,61 @@ def test_time_out_rule_reads_a_custom_profile() -> None:
 
 
 def test_cli_prints_warnings_and_keeps_exit_0(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main([str(EXAMPLES / "faulty" / "dead_transition.coral")]) == 0
-    captured = capsys.readouterr()
-    assert "[CORAL204]" in captured.err and "2 warnings" in captured.out
+    assert main(["lint", str(EXAMPLES / "faulty" / "dead_transition.coral")]) == 0
+    out = capsys.readouterr().out
+    assert "[CORAL204]" in out and "2 warnings" in out
+
+
+SHARED = [
+    *(text for _, text in SECTIONS),
+    (EXAMPLES / "pool_mission" / "pool_mission.coral").read_text(),
+    *(p.read_text() for p in sorted((EXAMPLES / "faulty").glob("*.coral"))),
+]
+
+
+@pytest.mark.parametrize("text", SHARED, ids=[f"mission{i}" for i in range(len(SHARED))])
+def test_a_shared_state_space_gives_the_same_findings(text: str) -> None:
+    """coral-check hands lint the verifier's state space: the findings must not change."""
+    result = compile_source(text, "doc.coral", base_dir=EXAMPLES / "pool_mission")
+    if result.net is None:
+        return  # the faulty mission that does not compile
+    alone = lint(result)
+    space = run_verification(result.net, VerifyOptions(structural=False)).space
+    assert lint(result, space=space) == alone
+
+
+def test_a_complete_shared_space_is_not_explored_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    text = dict(SECTIONS)["CORAL207"]
+    result = compile_source(text, "doc.coral")
+    assert result.net is not None
+    space = run_verification(result.net, VerifyOptions(structural=False)).space
+    assert space is not None and space.complete
+
+    def no_search(*args: object, **kwargs: object) -> None:
+        raise AssertionError("explored again")
+
+    monkeypatch.setattr("analysis.lint.explore", no_search)
+    assert [d.code for d in lint(result, space=space)] == ["CORAL207"]
+
+
+def test_a_reduced_or_smaller_space_is_not_trusted(monkeypatch: pytest.MonkeyPatch) -> None:
+    text = dict(SECTIONS)["CORAL207"]
+    result = compile_source(text, "doc.coral")
+    assert result.net is not None
+    reduced = run_verification(result.net, VerifyOptions(structural=False, por=True)).space
+    cut = run_verification(result.net, VerifyOptions(structural=False, max_states=1)).space
+    assert reduced is not None and reduced.reduced and cut is not None and not cut.complete
+    searches = []
+    original = statespace.explore
+
+    def counted(*args: Any, **kwargs: Any) -> Any:
+        searches.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr("analysis.lint.explore", counted)
+    for space in (reduced, cut):
+        assert [d.code for d in lint(result, space=space)] == ["CORAL207"]
+    assert len(searches) == 2
 
 
 def test_pnml_imports_are_not_linted() -> None:

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 
 from analysis.cli import main
 from analysis.report import Verdict
-from analysis.verify import VerifyOptions, verify
+from analysis.verify import VerifyOptions, run_verification, verify
 from coral_lang import Net, compile_mission, compile_source, read_pnml
 from tests.analysis.reference import explore_reference
 from tests.analysis.strategies import small_nets
@@ -268,3 +268,30 @@ def test_a_net_too_large_for_the_dense_encodings_is_inconclusive_not_a_crash(
     assert "58 places x 79 transitions" in report.property("deadlock").detail
     deadlock = report.to_dict()["deadlock"]
     assert isinstance(deadlock, dict) and deadlock["verdict"] == "inconclusive"
+
+
+def test_run_verification_keeps_the_state_space_of_its_report() -> None:
+    net = compile_mission(EXAMPLES / "pool_mission" / "pool_mission.coral")
+    verification = run_verification(net, VerifyOptions(structural=False))
+    space = verification.space
+    assert space is not None and space.complete and not space.reduced
+    figures = verification.report.statespace
+    assert (space.states, space.edges) == (figures.states, figures.edges) == (82, 139)
+    assert [p.verdict for p in verification.report.properties] == [
+        p.verdict for p in verify(net, VerifyOptions(structural=False)).properties
+    ]
+
+
+def test_structural_boundedness_comes_from_covering_invariants_without_z3() -> None:
+    net = compile_mission(EXAMPLES / "pool_mission" / "pool_mission.coral")
+    structure = verify(net).structure
+    invariants = structure["invariants"]
+    assert isinstance(invariants, dict) and invariants["covered_by_p_invariants"] is True
+    assert structure["structural_boundedness"] == {
+        "verdict": True,
+        "summary": "structurally bounded: the P-invariants cover every place, so their sum "
+        "is a positive weighting y with y^T C = 0",
+    }
+    unbounded = compile_mission(EXAMPLES / "faulty" / "unbounded.coral")
+    facts = verify(unbounded).structure["structural_boundedness"]
+    assert isinstance(facts, dict) and facts["verdict"] is False  # the z3 linear program

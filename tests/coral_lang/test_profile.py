@@ -147,3 +147,20 @@ def test_unreadable_profile_is_a_profile_error(tmp_path: Path) -> None:
         load_profile(tmp_path / "missing.yaml")
     with pytest.raises(ProfileError, match="no bundled profile"):
         load_bundled_profile("NOSUCH")
+
+
+def test_the_fast_yaml_parser_gives_the_same_values_and_positions(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Profiles are parsed with libyaml when PyYAML has it: same data, same line and
+    column of every field as the pure-Python parser, so error messages point alike."""
+    import yaml
+
+    from coral_lang import yamlsource
+
+    text = (Path(yamlsource.__file__).parent / "profiles" / "romeo.yaml").read_text()
+    fast = yamlsource.load_yaml(text, "romeo.yaml")
+    monkeypatch.setattr(yamlsource, "_LOADER", yaml.SafeLoader)
+    slow = yamlsource.load_yaml(text, "romeo.yaml")
+    assert fast.data == slow.data and fast.positions == slow.positions
+    assert len(fast.positions) > 100
