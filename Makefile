@@ -12,9 +12,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-# The paper's pool mission: compile it, verify it (report in out/), and fly the
-# simulated ROMEO through it with a scripted driver (plots in out/sim/). The CORAL
-# engine and the emulated Internet link replace the scripted driver with the runtime.
+# The paper's experiment on one machine: compile and verify the pool mission (reports and
+# certificate in out/), then run it with the CORAL engine against the simulated ROMEO across
+# the emulated Genoa-Lisbon link, in virtual time; logs and plots in out/run/.
 MISSION := examples/pool_mission/pool_mission.coral
 
 demo: $(STAMP)
@@ -25,10 +25,13 @@ demo: $(STAMP)
 	$(BIN)/coral-check verify $(MISSION) --format json -o out/pool_mission.verification.json
 	$(BIN)/coral-check $(MISSION) --format html -o out/pool_mission.report.html
 	@cat out/pool_mission.verification.txt
-	$(BIN)/romeo-sim mission --out out/sim --seed 0
+	rm -rf out/run
+	$(BIN)/coral-run $(MISSION) --certificate out/pool_mission.certificate.json \
+		--link genoa-lisbon --seed 0 --out out/run
 	@echo "verification report: out/pool_mission.verification.txt (.json, .report.html)"
 	@echo "pre-mission certificate: out/pool_mission.certificate.json"
-	@echo "simulated run, logs and plots: out/sim/ (mission.png, phase*.png, *.csv)"
+	@echo "mission run: out/run/controller.sqlite, out/run/vehicle.sqlite (event logs),"
+	@echo "             out/run/events.png (events' sequence), out/run/telemetry.png (track, depth, heading)"
 
 test: lint typecheck unit
 
@@ -48,6 +51,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/statespace.py
 	$(BIN)/python bench/sim.py
 	$(BIN)/python bench/cli.py
+	$(BIN)/python bench/engine.py
 
 clean:
 	rm -rf $(VENV) out .mypy_cache .pytest_cache .ruff_cache .hypothesis

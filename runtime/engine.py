@@ -103,8 +103,7 @@ class UnexpectedReply:
     reason: str
 
 
-@dataclass(frozen=True)
-class StepResult:
+class StepResult(NamedTuple):
     """What one step did: the firings in order, the commands to send, and the outcome."""
 
     firings: tuple[Firing, ...]
@@ -141,8 +140,7 @@ class CommandStatus:
         return text
 
 
-@dataclass
-class _InFlight:
+class _InFlight(NamedTuple):
     command_id: int
     transition: int
     sent_at: float
@@ -161,6 +159,7 @@ class _Compiled:
     is_engine: list[bool]
     priority: list[int]
     timeout: list[float | None]  # a command's time_out parameter, if it has one
+    command: list[Command | None]
     reply_of: dict[tuple[int, str], int] = field(default_factory=dict)
 
 
@@ -201,6 +200,7 @@ def _compile(net: Net) -> _Compiled:
         is_engine=is_engine,
         priority=priority,
         timeout=timeouts,
+        command=[t.command for t in net.transitions],
         reply_of=reply_of,
     )
 
@@ -409,13 +409,13 @@ class Engine:
                     f"a cycle of engine transitions (last fired: {self._c.names[chosen]})"
                 )
             self._fire(chosen)
-            tr = self.net.transitions[chosen]
-            if tr.command is not None:
-                sent = self._send(chosen, tr.command, now)
+            command = self._c.command[chosen]
+            if command is not None:
+                sent = self._send(chosen, command, now)
                 commands.append(sent)
-                firings.append(Firing(tr.name, now, sent.command_id))
+                firings.append(Firing(self._c.names[chosen], now, sent.command_id))
             else:
-                firings.append(Firing(tr.name, now))
+                firings.append(Firing(self._c.names[chosen], now))
         return StepResult(tuple(firings), tuple(commands), self.outcome())
 
     def _send(self, index: int, command: Command, now: float) -> SentCommand:

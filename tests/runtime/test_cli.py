@@ -1,0 +1,151 @@
+"""``coral-run``: help, the gate, exit codes, a whole run with its logs and plots."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from runtime.cli import build_run_parser, main
+from runtime.eventlog import EventLog
+from tests.runtime.helpers import POOL_MISSION
+
+FAULTY = POOL_MISSION.parent.parent / "faulty" / "deadlock.coral"
+
+
+def test_help_names_the_modes_and_exit_codes(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for word in ("--vehicle", "--sim", "--realtime", "--link", "--resume", "--verify", "timeline"):
+        assert word in out
+    assert "exit codes: 0" in out
+    assert build_run_parser().prog == "coral-run"
+
+
+def test_no_mission_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main([])
+    assert exc.value.code == 2
+    assert "give a MISSION" in capsys.readouterr().err
+
+
+def test_bad_vehicle_address_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main([str(POOL_MISSION), "--vehicle", "nowhere"])
+    assert exc.value.code == 2
+    assert "HOST:PORT" in capsys.readouterr().err
+
+
+def test_a_mission_without_certificate_does_not_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = main(
+        [
+            str(POOL_MISSION),
+            "--certificate",
+            str(tmp_path / "none.json"),
+            "--out",
+            str(tmp_path / "run"),
+        ]
+    )
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "no certificate" in err and "coral-check verify" in err
+    assert not (tmp_path / "run" / "controller.sqlite").exists()
+
+
+def test_a_mission_that_fails_verification_gets_no_certificate(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cert = tmp_path / "deadlock.json"
+    code = main([str(FAULTY), "--verify", "--certificate", str(cert), "--out", str(tmp_path)])
+    assert code == 2
+    assert "deadlock violated" in capsys.readouterr().err
+    assert not cert.exists()
+
+
+def test_a_mission_that_does_not_compile_is_an_input_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bad.coral"
+    bad.write_text("mission m\nvehicle ROMEO\nplace a = 1\ntransition t wait { b }\n")
+    assert main([str(bad), "--verify", "--out", str(tmp_path / "run")]) == 2
+    assert "bad.coral:4:" in capsys.readouterr().err
+
+
+def test_a_verified_run_completes_logs_and_plots(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cert = tmp_path / "pool.json"
+    out = tmp_path / "run"
+    code = main(
+        [
+            str(POOL_MISSION),
+            "--verify",
+            "--certificate",
+            str(cert),
+            "--out",
+            str(out),
+            "--link",
+            "genoa-lisbon",
+            "-q",
+        ]
+    )
+    assert code == 0, capsys.readouterr()
+    assert cert.exists()
+    with EventLog.open(out / "controller.sqlite") as log:
+        assert log.count("command-sent") == 23
+        assert log.role == "controller"
+    with EventLog.open(out / "vehicle.sqlite") as log:
+        assert log.count("command-received") == 23
+        assert sum(1 for _ in log.samples()) > 300
+    for png in ("events.png", "telemetry.png"):
+        assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # A second run into the same folder would mix two missions' logs: refused.
+    assert main([str(POOL_MISSION), "--certificate", str(cert), "--out", str(out), "-q"]) == 2
+    assert "earlier run" in capsys.readouterr().err
+    # The timeline subcommand reads the two logs back.
+    assert (
+        main(
+            [
+                "timeline",
+                str(out / "controller.sqlite"),
+                str(out / "vehicle.sqlite"),
+                "--out",
+                str(tmp_path / "plots"),
+            ]
+        )
+        == 0
+    )
+    assert (tmp_path / "plots" / "events.png").exists()
+
+
+def test_a_time_limit_ends_the_run_with_exit_1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cert = tmp_path / "pool.json"
+    code = main(
+        [
+            str(POOL_MISSION),
+            "--verify",
+            "--certificate",
+            str(cert),
+            "--out",
+            str(tmp_path / "run"),
+            "--time-limit",
+            "20",
+            "--no-plots",
+            "-q",
+        ]
+    )
+    assert code == 1
+    assert "time-limit" in capsys.readouterr().out
+
+
+def test_timeline_of_a_missing_log_is_an_input_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["timeline", str(tmp_path / "nope.sqlite")]) == 2
+    assert "nope.sqlite" in capsys.readouterr().err
