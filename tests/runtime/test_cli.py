@@ -149,3 +149,34 @@ def test_timeline_of_a_missing_log_is_an_input_error(
 ) -> None:
     assert main(["timeline", str(tmp_path / "nope.sqlite")]) == 2
     assert "nope.sqlite" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_realtime_simulator_over_localhost_sockets(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cert = tmp_path / "pool.json"
+    out = tmp_path / "run"
+    code = main(
+        [
+            str(POOL_MISSION),
+            "--verify",
+            "--certificate",
+            str(cert),
+            "--out",
+            str(out),
+            "--sim",
+            "--realtime",
+            "--speed",
+            "40",
+            "--link",
+            "lan",
+            "--no-plots",
+            "-q",
+        ]
+    )
+    assert code == 0, capsys.readouterr()
+    with EventLog.open(out / "controller.sqlite") as log:
+        assert log.count("command-sent") == 23
+        assert log.meta["realtime"] is True
+        assert sum(1 for _ in log.samples()) > 50  # telemetry over real UDP
