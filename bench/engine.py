@@ -21,6 +21,7 @@ uses real certificates instead, which takes longer).
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import statistics
 import sys
@@ -82,9 +83,14 @@ def approval_for(net: Net, really_verify: bool) -> CertificateCheck:
         return check_certificate(net, path)
 
 
-def run_once(net: Net, approval: CertificateCheck) -> tuple[int, float, list[int]]:
+def run_once(
+    net: Net, approval: CertificateCheck, freeze: bool = True
+) -> tuple[int, float, list[int]]:
     """One whole mission; returns (messages, seconds, per-message latencies in ns)."""
     engine = Engine(net, approval)
+    if freeze:
+        gc.collect()
+        gc.freeze()  # as coral-run does: the net lives as long as the process
     pending = list(engine.start(0.0).commands)
     latencies: list[int] = []
     clock = time.perf_counter_ns
@@ -108,6 +114,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("--repeat", type=int, default=5, help="runs per net (default 5)")
     parser.add_argument("--verify", action="store_true", help="verify and certify every net")
+    parser.add_argument(
+        "--no-freeze", action="store_true", help="leave the net's objects to the cyclic GC"
+    )
     args = parser.parse_args(argv)
     nets = [
         ("pool mission", compile_mission(POOL)),
@@ -129,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         rates, medians, p99s = [], [], []
         messages = 0
         for _ in range(args.repeat):
-            messages, seconds, lat = run_once(net, approval)
+            messages, seconds, lat = run_once(net, approval, not args.no_freeze)
             rates.append(messages / seconds)
             lat.sort()
             medians.append(lat[len(lat) // 2] / 1000)

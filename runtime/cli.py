@@ -17,6 +17,7 @@ that does not compile, no passing certificate, an unreadable log or key).
 from __future__ import annotations
 
 import argparse
+import gc
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -184,6 +185,10 @@ def _run(options: argparse.Namespace) -> int:
             mission_path = recorded
         out_dir = options.resume.parent
     approved = approve_mission(mission_path, options.certificate, issue=options.verify)
+    # The net and the compiler's objects live as long as the run: take them out of the
+    # cyclic collector's scans, which otherwise grow with the net (bench/engine.py).
+    gc.collect()
+    gc.freeze()
     if approved.issued_now:
         print(f"coral-run: verified; certificate written to {approved.approval.path}")
     console = (lambda line: None) if options.quiet else print
