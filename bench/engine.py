@@ -118,17 +118,18 @@ def main(argv: list[str] | None = None) -> int:
         "--no-freeze", action="store_true", help="leave the net's objects to the cyclic GC"
     )
     args = parser.parse_args(argv)
-    nets = [
-        ("pool mission", compile_mission(POOL)),
-        (
-            "chain, 10,000 transitions",
-            compile_source(generate_mission(10_000), "chain.coral").raise_for_errors(),
-        ),
+    nets = [("pool mission", compile_mission(POOL))]
+    for size in (100, 1_000, 10_000):  # same shape, growing: the cost must stay flat
+        text = generate_mission(size)
+        nets.append(
+            (f"chain, {size:,} transitions", compile_source(text, "chain.coral").raise_for_errors())
+        )
+    nets.append(
         (
             "100 parallel chains, 10,001 transitions",
             compile_source(parallel_chains(100, 100), "parallel.coral").raise_for_errors(),
-        ),
-    ]
+        )
+    )
     print(
         f"{'net':<42} {'transitions':>11} {'messages':>9} {'msg/s':>11} "
         f"{'median us':>10} {'p99 us':>8} {'checks/msg':>10}"

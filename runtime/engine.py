@@ -400,22 +400,24 @@ class Engine:
 
     def _run(self, now: float, firings: list[Firing]) -> StepResult:
         commands: list[SentCommand] = []
+        names, command_of = self._c.names, self._c.command
+        choose, fire, limit = self._choose, self._fire, self._max_firings
         count = 0
-        while (chosen := self._choose()) is not None:
+        while (chosen := choose()) is not None:
             count += 1
-            if count > self._max_firings:
+            if count > limit:
                 raise EngineError(
-                    f"more than {self._max_firings} firings without waiting for the vehicle: "
-                    f"a cycle of engine transitions (last fired: {self._c.names[chosen]})"
+                    f"more than {limit} firings without waiting for the vehicle: "
+                    f"a cycle of engine transitions (last fired: {names[chosen]})"
                 )
-            self._fire(chosen)
-            command = self._c.command[chosen]
-            if command is not None:
+            fire(chosen)
+            command = command_of[chosen]
+            if command is None:
+                firings.append(Firing(names[chosen], now))
+            else:
                 sent = self._send(chosen, command, now)
                 commands.append(sent)
-                firings.append(Firing(self._c.names[chosen], now, sent.command_id))
-            else:
-                firings.append(Firing(self._c.names[chosen], now))
+                firings.append(Firing(names[chosen], now, sent.command_id))
         return StepResult(tuple(firings), tuple(commands), self.outcome())
 
     def _send(self, index: int, command: Command, now: float) -> SentCommand:
@@ -445,18 +447,27 @@ class Engine:
         return True
 
     def _fire(self, t: int) -> None:
-        m = self.marking
-        for p, w in self._c.inputs[t]:
+        c, m = self._c, self.marking
+        for p, w in c.inputs[t]:
             m[p] -= w
-        for p, w in self._c.outputs[t]:
+        for p, w in c.outputs[t]:
             m[p] += w
         self.firings += 1
         # Only a place that gained tokens can enable a transition; one that lost tokens
-        # can only disable some, and those leave the heap lazily (`_peek`).
-        consumers = self._c.engine_consumers
-        for p in self._c.gains[t]:
+        # can only disable some, and those leave the heap lazily (`_peek`). This is
+        # `_consider` inlined: it runs for every firing.
+        queued, inputs, consumers = self._queued, c.inputs, c.engine_consumers
+        for p in c.gains[t]:
             for u in consumers[p]:
-                self._consider(u)
+                if queued[u]:
+                    continue
+                self.checks += 1
+                for q, w in inputs[u]:
+                    if m[q] < w:
+                        break
+                else:
+                    queued[u] = True
+                    heapq.heappush(self._heap, (-c.priority[u], u))
 
     def _requeue_all(self) -> None:
         """Rebuild the heap from scratch (construction and restore: O(net))."""
@@ -484,14 +495,20 @@ class Engine:
         return None
 
     def _choose(self) -> int | None:
-        first = self._peek()
-        if first is None:
-            return None
+        """The transition to fire next, taken off the heap; None when nothing is enabled."""
         if self.policy is Policy.RANDOM:
-            return self._choose_random()
-        heapq.heappop(self._heap)
-        self._queued[first] = False
-        return first
+            return None if self._peek() is None else self._choose_random()
+        heap, queued, m, inputs = self._heap, self._queued, self.marking, self._c.inputs
+        while heap:
+            _, t = heapq.heappop(heap)
+            queued[t] = False
+            self.checks += 1
+            for p, w in inputs[t]:
+                if m[p] < w:
+                    break
+            else:
+                return t
+        return None
 
     def _choose_random(self) -> int:
         """Uniform among the enabled transitions of the top priority (O(enabled): tests)."""
