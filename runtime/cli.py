@@ -58,7 +58,8 @@ def build_run_parser() -> argparse.ArgumentParser:
         prog="coral-run",
         description="Run a verified CORAL mission against ROMEO (or the simulator) across "
         "a real or emulated link, logging both sides. Also: 'coral-run timeline LOG...' "
-        "plots a run's logs.",
+        "plots a run's logs; 'coral-run fuzz MISSION --runs N --seed S' runs it under N "
+        "random schedules against the simulator.",
         epilog=EXIT_CODES_HELP,
     )
     parser.add_argument("mission", nargs="?", metavar="MISSION", help="mission (.coral)")
@@ -136,6 +137,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     if args and args[0] == "timeline":
         return _timeline(build_timeline_parser().parse_args(args[1:]))
+    if args and args[0] == "fuzz":
+        from runtime.fuzz import main as fuzz_main
+
+        return fuzz_main(args[1:])
     parser = build_run_parser()
     options = parser.parse_args(args)
     if options.mission is None and options.resume is None:

@@ -188,6 +188,7 @@ class Controller:
         self._last_sent = 0.0
         self._heartbeat_interval = self.options.heartbeat_interval
         self._result: RunResult | None = None
+        self._written: set[int] = set()  # command ids written on some connection already
 
     # ------------------------------------------------------------------ construction
 
@@ -241,7 +242,7 @@ class Controller:
         consumed = state.get("consumed")
         if not isinstance(mission_id, int) or not isinstance(consumed, int):
             raise ValueError(f"{log.path}: the committed state lacks mission_id/consumed")
-        return cls(
+        controller = cls(
             engine,
             link,
             psk,
@@ -251,6 +252,10 @@ class Controller:
             mission_known=bool(state.get("mission_known", True)),
             **kwargs,  # type: ignore[arg-type]
         )
+        # The dead controller may have written these already: sending them again is a
+        # re-send (the vehicle runs each id once either way).
+        controller._written = {c.command_id for c in engine.in_flight()}
+        return controller
 
     # ------------------------------------------------------------------ the run
 
@@ -347,7 +352,7 @@ class Controller:
         self._write(conn, codec, Heartbeat(now))  # proves the connection live
         self._commit()
         for sent in self.engine.in_flight():
-            self._send_command(conn, codec, sent, resend=self._result.connections > 1)
+            self._send_command(conn, codec, sent, resend=sent.command_id in self._written)
         self._console(
             f"t={now:.1f} connected (one-way delay {sync.delay * 1000:.0f} ms, vehicle "
             f"clock {sync.vehicle_ahead:+.3f} s); {len(self.engine.in_flight())} commands in flight"
@@ -457,7 +462,7 @@ class Controller:
         self._commit()
         self._write(conn, codec, ReplyAck(self.consumed))
         for sent in step.commands:
-            self._send_command(conn, codec, sent, resend=False)
+            self._send_command(conn, codec, sent, resend=sent.command_id in self._written)
 
     def _send_command(
         self, conn: Connection, codec: StreamCodec, sent: SentCommand, *, resend: bool
@@ -465,6 +470,7 @@ class Controller:
         assert self._result is not None
         params = dict(sent.command.params)
         self._write(conn, codec, Command(sent.command_id, sent.command.name, sent.sent_at, params))
+        self._written.add(sent.command_id)
         if resend:
             self._result.commands_resent += 1
             self.log.event(self._now(), "command-resent", command_id=sent.command_id)

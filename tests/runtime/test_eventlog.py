@@ -499,3 +499,17 @@ def test_the_documented_schema_is_the_one_written(tmp_path: Path) -> None:
     db.close()
     assert f"`{APPLICATION_ID:#X}`".replace("0X", "0x") in doc
     assert f"`{SCHEMA_VERSION}` (`SCHEMA_VERSION`)" in doc
+
+
+def test_relaxed_durability_still_commits_and_refuses_read_only_logs(tmp_path: Path) -> None:
+    path = tmp_path / "fuzz.sqlite"
+    with EventLog.create(path, role="controller", mission="m", meta={}) as log:
+        log.relax_durability()
+        assert log._connection().execute("PRAGMA synchronous").fetchone()[0] == 0
+        log.event(1.0, "tick")
+        log.commit({"count": 1})
+    with EventLog.open(path) as log:
+        assert log.checkpoint() == {"count": 1}
+        assert log.count("tick") == 1
+        with pytest.raises(EventLogError, match="read-only"):
+            log.relax_durability()
