@@ -402,8 +402,8 @@ class EmulatedLink:
         """A datagram from the vehicle reached the link now: deliver it as the emulator says."""
         self.stats.datagrams += 1
         loop = asyncio.get_running_loop()
-        if self.emulator is None:
-            loop.call_soon(self._deliver_datagram, receive, data)
+        if self.emulator is None:  # a perfect link: hand it over now, nothing in flight
+            self._deliver_datagram(receive, data)
             return
         fate = self.emulator.datagram(Direction.DOWN, len(data), loop.time())
         if fate.lost:
