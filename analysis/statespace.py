@@ -2,26 +2,38 @@
 
 Breadth first, one layer at a time, vectorised over the frontier with numpy:
 
-1. a block of the frontier (markings as columns of small integers) is checked against
-   every transition's sparse preset at once, giving an enabled matrix; its non-zeros
-   are the edges;
-2. each edge (marking, enabled transition) yields its successor's *packed key* by one
-   addition per key word (see `analysis.encoding.Layout`), never a full row;
-3. the keys go through a vectorised open-addressing set (`KeyStore`) that numbers new
+1. a block of the frontier (markings as columns of small integers: the field values
+   of `analysis.encoding.FieldNet`, one per count or component) is checked against
+   every transition's preset at once, giving an enabled matrix whose non-zeros are the
+   edges (all counted, as the MCC counts them); on nets with hundreds of transitions
+   that take a component's token, those are looked up by the component's value instead
+   (`_EnablingIndex`);
+2. *sleep sets* (`SleepSets`) drop the edges whose successor another edge is sure to
+   reach in the same layer, typically three quarters of them on concurrent nets: only
+   the others are fired;
+3. each fired edge yields its successor's *packed key* by one addition per key word
+   (see `analysis.encoding.Layout`; one-hot components make most markings one word),
+   never a full row;
+4. the keys go through a vectorised open-addressing set (`KeyStore`) that numbers new
    markings as they are first met, so state numbers grow with BFS depth
    (``layer_starts``) and parents always precede their children;
-4. only new markings get a column (``parent column + delta``) for the next layer.
+5. only new markings get a column (``parent column + delta``) for the next layer.
 
-Counts are exact: packed keys are injective (no hash collisions to resolve),
-``edges`` counts (marking, enabled transition) pairs as the MCC does, and a bit field
-that some firing would overflow is widened (every stored key is re-packed) before any
-successor using it is trusted; past ``2**60`` tokens exploration stops with a reason.
-Each state keeps its parent and the transition that found it (``int32`` + ``int16``
-for usual budgets), so `StateSpace.trace_to` returns a shortest firing sequence.
+Narrow layers (deep state spaces: long missions, counters) are explored several layers
+per insertion instead, see `_Explorer.speculate`: numpy's cost per call, not per
+marking, is what limits a layer of a hundred markings.
 
-Memory per stored state: ``8 * W`` bytes of key (``W`` = words per marking, 1 for up
-to ~63 one-bit places), ``16 * W`` to ``32 * W`` bytes of hash table (load <= 0.5),
-6 bytes of parent pointer: about 30 to 55 bytes for one-word nets.
+Counts are exact: packed keys are injective on reachable markings, multi-word keys
+are compared in full after a tag match, ``edges`` counts (marking, enabled transition)
+pairs, and a count field that some firing would overflow is widened (every stored key
+is re-packed) before any successor using it is trusted; past ``2**60`` tokens
+exploration stops with a reason. Each state keeps its parent and the transition that
+found it (``int32`` + ``int16`` for usual budgets), so `StateSpace.trace_to` returns a
+shortest firing sequence (sleep sets keep every state at its BFS depth).
+
+Memory per stored state: ``8 * W`` bytes of key (``W`` = words per marking), 6 bytes of
+parent pointer, and 24 to 48 bytes of hash table (8-byte tag and 4-byte state number
+per slot, load 0.25 to 0.5): about 40 to 60 bytes for one-word nets.
 
 Typical use::
 
@@ -41,7 +53,21 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from analysis.encoding import MAX_FIELD_BITS, Added, CompactNet, KeyStore, Layout, row_dtype
+from analysis.encoding import (
+    MAX_FIELD_BITS,
+    NEVER,
+    RESERVE_LIMIT,
+    Added,
+    Arcs,
+    CompactNet,
+    FieldGroup,
+    FieldNet,
+    Growable,
+    KeyStore,
+    Layout,
+    one_hot_components,
+    row_dtype,
+)
 from analysis.progress import ProgressCallback, ProgressInfo
 from analysis.stubborn import StubbornSets
 from coral_lang.net import Net
@@ -57,6 +83,9 @@ EDGES_PER_STEP = 1 << 19
 
 CELLS_PER_STEP = 1 << 23
 """Most (transition, marking) cells of one step's enabled matrix (8 MB of booleans)."""
+
+BLOCK_CELLS = 1 << 22
+"""Most (marking, place or field) cells decoded at once (32 MB of ``int64``)."""
 
 Markings = npt.NDArray[np.int64]
 Predicate = Callable[[Markings], npt.NDArray[np.bool_]]
@@ -147,7 +176,9 @@ class StateSpace:
         return self.layout.unpack(self.keys).astype(np.int64)
 
     def iter_markings(self, chunk: int = 1 << 16) -> Iterator[tuple[int, Markings]]:
-        """``(first_state, markings)`` blocks of at most ``chunk`` states, in order."""
+        """``(first_state, markings)`` blocks of at most ``chunk`` states, in order (fewer
+        on nets with many places: a block stays within `BLOCK_CELLS` counts)."""
+        chunk = max(1, min(chunk, BLOCK_CELLS // max(1, len(self.net.places))))
         for start in range(0, self.states, chunk):
             yield start, self.layout.unpack(self.keys[start : start + chunk]).astype(np.int64)
 
@@ -210,16 +241,339 @@ def _nonzero(matrix: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.
     return rows, flat - rows * matrix.shape[1]
 
 
+Edges = tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]
+"""``(transitions, sources)``: one entry per edge; sources are block columns."""
+
+SLEEP_WORDS = 8
+"""Sleep sets track at most ``64 * SLEEP_WORDS`` transitions (the first ones); the
+others are always fired. Tracking fewer only means less reduction."""
+
+SLEEP_MIN_DEGREE = 1.5
+"""Sleep sets are used while the explored markings enable at least this many
+transitions on average; below, there is little to save and their bookkeeping costs
+more than it saves (deep, narrow state spaces)."""
+
+DEFAULT_RESERVE = 1 << 20
+"""States to reserve address space for when there is no state budget."""
+
+NARROW_WIDTH = 1024
+"""Frontiers up to this many markings are explored several layers at a time (deep,
+narrow state spaces: long missions, counters), see `_Explorer.speculate`."""
+
+NARROW_CANDIDATES = 1 << 14
+"""Most candidates one narrow round generates before it inserts them."""
+
+NARROW_LEVELS = 512
+"""Most layers one narrow round explores."""
+
+KEYED_ARCS = 2
+"""Transitions with at most this many input fields, one of them a component, are
+enabled by lookup (`_EnablingIndex`)..."""
+
+KEYED_SHARE = 0.75
+"""... when they are at least this share of all transitions (otherwise the dense test
+of the others dominates, and the lookup only adds a pass and a sort)..."""
+
+KEYED_MIN = 256
+"""... and there are at least this many transitions: below, testing every transition in
+every marking costs less than the lookup (Referendum, 31 transitions: 40 % slower)."""
+
+DENSE_DELTA_CELLS = 1 << 24
+"""Largest places x transitions for a dense effect matrix (successor columns by one
+gather); larger nets add their sparse effects instead."""
+
+
+class SleepSets:
+    """Sleep sets for breadth-first search, which keep every state and its BFS depth.
+
+    Transitions ``t`` and ``s`` are *independent* when neither lowers an input place of
+    the other: where both are enabled, firing one leaves the other enabled, and both
+    orders reach the same marking. Order transitions by index and layer ``k`` by the
+    order the search numbers it in; the *first arrival* of a state of layer ``k + 1`` is
+    its smallest edge ``(p, s)`` from layer ``k`` (source number, then transition). The
+    explorer fires edges in exactly that order, so a new state's first arrival is the
+    edge that found it. Its sleep set is then
+
+        ``sleep(m) = (sleep(p) | {u enabled in p, u < s}) & independent(s)``
+
+    and the transitions in ``sleep(m)`` are not fired from ``m``. Why nothing is lost:
+    take, for any reachable ``m'``, its lexicographically smallest shortest path ``w``.
+    If its last edge ``(m, t)`` were asleep, the sleep set's origin gives a position
+    ``j`` with ``t < w_j``, ``t`` enabled before ``w_j`` and independent of ``w_j ..
+    w_n``; moving ``t`` there gives another shortest path to ``m'`` that is smaller,
+    a contradiction. So every edge of these paths is fired and every state is found in
+    its own layer. Transitions that change nothing are never fired either.
+
+    Sleep sets only ever drop edges; states, edges counted, deadlocks and bounds are
+    those of the full graph. Each frontier state carries ``words`` ``uint64`` of sleep
+    bits (the first ``64 * words`` transitions are tracked).
+    """
+
+    def __init__(self, cn: CompactNet) -> None:
+        n_t = cn.n_transitions
+        self.tracked = min(n_t, 64 * SLEEP_WORDS)
+        self.words = max(1, -(-self.tracked // 64))
+        t = np.arange(n_t, dtype=np.int64)
+        inside = t < self.tracked
+        self.word = np.where(inside, t // 64, 0)
+        self.bit = np.where(inside, np.left_shift(np.uint64(1), (t % 64).astype(np.uint64)), 0)
+        self.bit = self.bit.astype(np.uint64)
+        self.independent = self._independence(cn)
+
+    def _masks(
+        self, cn: CompactNet, rows: npt.NDArray[np.int64], places: npt.NDArray[np.int64]
+    ) -> npt.NDArray[np.uint64]:
+        """Per place, the bits of the tracked transitions among ``rows`` (arcs)."""
+        out = np.zeros(cn.n_places * self.words, dtype=np.uint64)
+        sel = rows < self.tracked
+        np.bitwise_or.at(out, places[sel] * self.words + self.word[rows[sel]], self.bit[rows[sel]])
+        return out.reshape(cn.n_places, self.words)
+
+    def _independence(self, cn: CompactNet) -> npt.NDArray[np.uint64]:
+        """``(T, words)``: per transition, the tracked transitions independent of it."""
+        n_t, w = cn.n_transitions, self.words
+        lowers = cn.effects.values < 0
+        low_t, low_p = cn.effects.rows[lowers], cn.effects.places[lowers]
+        in_t, in_p = cn.inputs.rows, cn.inputs.places
+        consumers = self._masks(cn, in_t, in_p)  # tracked transitions reading each place
+        lowerers = self._masks(cn, low_t, low_p)  # tracked transitions lowering it
+        flat = np.zeros(n_t * w, dtype=np.uint64)
+        for k in range(w):
+            np.bitwise_or.at(flat, low_t * w + k, consumers[low_p, k])
+            np.bitwise_or.at(flat, in_t * w + k, lowerers[in_p, k])
+        dependent = flat.reshape(n_t, w)
+        own = np.arange(n_t) < self.tracked
+        dependent[own, self.word[own]] |= self.bit[own]
+        everything = np.zeros(w, dtype=np.uint64)
+        for t in range(self.tracked):
+            everything[t // 64] |= np.uint64(1 << (t % 64))
+        return ~dependent & everything
+
+    def awake(self, sleep: npt.NDArray[np.uint64], edges: Edges) -> npt.NDArray[np.bool_]:
+        """Which edges are not asleep; ``sleep`` is ``(n, words)`` for the block."""
+        trans, src = edges
+        if self.words == 1:
+            word = sleep.reshape(-1).take(src)
+        else:
+            word = sleep.reshape(-1).take(src * self.words + self.word.take(trans))
+        word &= self.bit.take(trans)
+        awake: npt.NDArray[np.bool_] = word == 0
+        return awake
+
+    def successors(
+        self,
+        sleep: npt.NDArray[np.uint64] | None,
+        edges: Edges,
+        first: npt.NDArray[np.int64],
+    ) -> npt.NDArray[np.uint64]:
+        """Sleep sets ``(len(first), words)`` of the new states found by the fired
+        ``edges`` at positions ``first``, which are in (source, transition) order."""
+        trans, src = edges
+        rep_t, rep_s = trans.take(first), src.take(first)
+        # The fired transitions of the same source before each first arrival are the
+        # enabled u < s (asleep ones are in sleep(p)): an exclusive prefix OR of their
+        # bits within the source's run, computed as a prefix sum (the bits are distinct).
+        runs = np.searchsorted(src, rep_s)
+        out = np.empty((first.size, self.words), dtype=np.uint64)
+        bits = self.bit.take(trans)
+        for k in range(self.words):
+            mine = bits if self.words == 1 else np.where(self.word.take(trans) == k, bits, 0)
+            total = np.cumsum(mine, dtype=np.uint64)
+            total -= mine
+            out[:, k] = total.take(first) - total.take(runs)
+        if sleep is not None:
+            out |= sleep.take(rep_s, axis=0)
+        out &= self.independent.take(rep_t, axis=0)
+        return out
+
+
 class _Stop(Exception):
     """Raised inside the loop to end exploration early with a reason."""
+
+
+class _Round:
+    """The levels of one narrow round (see `_Explorer.speculate`): per level, the
+    candidates' columns and keys, the edge (source in the level above, transition) that
+    produced each, and how many transitions each candidate of the level above enables
+    (``counts[0]`` is for the layer the round started from)."""
+
+    def __init__(self) -> None:
+        self.cols: list[npt.NDArray[np.integer]] = []
+        self.keys: list[npt.NDArray[np.uint64]] = []
+        self.src: list[npt.NDArray[np.int64]] = []
+        self.trans: list[npt.NDArray[np.int64]] = []
+        self.counts: list[npt.NDArray[np.int64]] = []
+        self.ends: list[int] = []  # cumulative candidates after each level
+        self.total = 0
+        self.cells = 0  # enabled-matrix cells computed so far
+
+    def add(
+        self,
+        counts: npt.NDArray[np.int64],
+        cols: npt.NDArray[np.integer],
+        keys: npt.NDArray[np.uint64],
+        src: npt.NDArray[np.int64],
+        trans: npt.NDArray[np.int64],
+        cells: int,
+    ) -> None:
+        """One more level (``counts`` is for the level it was expanded from, whose
+        enabled matrix had ``cells`` cells)."""
+        self.cells += cells
+        self.counts.append(counts)
+        self.cols.append(cols)
+        self.keys.append(keys)
+        self.src.append(src)
+        self.trans.append(trans)
+        self.total += keys.shape[0]
+        self.ends.append(self.total)
+
+    def joined(
+        self,
+    ) -> tuple[
+        npt.NDArray[np.uint64],
+        npt.NDArray[np.integer],
+        npt.NDArray[np.int64],
+        npt.NDArray[np.int64],
+        npt.NDArray[np.int64],
+    ]:
+        """All candidates in level order: keys, columns, parent (position of the parent
+        candidate, or ``-1 - column`` of a parent in the starting layer), transition,
+        and how many transitions each enables (``-1`` on the last level, which was not
+        expanded)."""
+        starts = [0, *self.ends[:-1]]
+        parent = [src + starts[j - 1] if j else -1 - src for j, src in enumerate(self.src)]
+        counts = [*self.counts[1:], np.full(self.keys[-1].shape[0], -1, dtype=np.int64)]
+        return (
+            np.concatenate(self.keys),
+            np.concatenate(self.cols, axis=1),
+            np.concatenate(parent),
+            np.concatenate(self.trans),
+            np.concatenate(counts),
+        )
+
+
+class _EnablingIndex:
+    """Which transitions `_Explorer.edges_of` looks up by the value of a field instead
+    of testing them in every marking.
+
+    A transition with an input place in a component tests ``field == value`` and can
+    only be enabled where that field holds that value. Such transitions are listed per
+    field, by value (each keyed on its component input with the most values: fewest
+    candidates per lookup); a block's candidates are the lists its field values select,
+    and only their other input arcs are tested. A Peterson marking then costs a few
+    candidates instead of 332 transition tests. Transitions with count inputs only are
+    tested densely (``dense``, presets ``groups`` renumbered from 0).
+
+    Attributes:
+        dense: transitions tested densely.
+        groups: their presets.
+        keyed: per key field, ``(field, start, transitions)``: the transitions keyed on
+            value ``v`` are ``transitions[start[v]:start[v + 1]]``.
+        rest_width: most other input arcs of a keyed transition.
+        rest_fields, rest_low, rest_exact: those arcs, ``(rest_width, T)``, padded with
+            the zero row ``n_fields`` tested ``>= 0``.
+    """
+
+    def __init__(self, fnet: FieldNet, layout: Layout, n_t: int) -> None:
+        n_f = fnet.n_fields
+        values = np.zeros(n_f + 1, dtype=np.int64)  # per field, its number of values
+        for f, (members, onehot, first) in enumerate(
+            zip(layout.members, layout.onehot, layout.first, strict=True)
+        ):
+            values[f] = len(members) + first if onehot else 0
+        width = min(KEYED_ARCS, max((g.fields.shape[1] for g in fnet.groups), default=0))
+        fields = np.full((n_t, width), n_f, dtype=np.int64)
+        low = np.zeros((n_t, width), dtype=np.int64)
+        exact = np.zeros((n_t, width), dtype=bool)
+        wide = np.zeros(n_t, dtype=bool)  # more arcs than the index handles
+        for g in fnet.groups:
+            size = g.fields.shape[1]
+            if size > width:
+                wide[g.transitions] = True
+                continue
+            fields[g.transitions, :size] = g.fields
+            low[g.transitions, :size] = g.low
+            exact[g.transitions, :size] = g.exact
+        never = np.zeros(n_t, dtype=bool)
+        never[fnet.never] = True
+        score = np.where(exact, values[fields], -1)
+        key = score.argmax(axis=1) if width else np.zeros(n_t, dtype=np.int64)
+        has_key = (score.max(axis=1) >= 0) if width else np.zeros(n_t, dtype=bool)
+        has_key &= ~wide
+        if n_t < KEYED_MIN or np.count_nonzero(has_key) < KEYED_SHARE * n_t:
+            has_key[:] = False  # the dense test is cheap, or most of the work anyway
+        keyed_t = np.flatnonzero(has_key & ~never)
+        self.dense = np.flatnonzero(~has_key & ~never)
+        self.groups = self._dense_groups(fnet, n_t)
+        self.keyed = self._lists(
+            keyed_t, fields[keyed_t, key[keyed_t]], low[keyed_t, key[keyed_t]], values
+        )
+        self.rest_width = max(0, width - 1)
+        take = np.zeros((n_t, 0), dtype=np.int64)
+        if width:  # every arc column but the key's
+            rest = np.ones((n_t, width), dtype=bool)
+            rest[np.arange(n_t), key] = False
+            take = np.nonzero(rest)[1].reshape(n_t, self.rest_width)
+        rows = np.arange(n_t)[:, None]
+        self.rest_fields = np.ascontiguousarray(fields[rows, take].T)
+        self.rest_low = np.ascontiguousarray(low[rows, take].T)
+        self.rest_exact = np.ascontiguousarray(exact[rows, take].T)
+
+    def _dense_groups(self, fnet: FieldNet, n_t: int) -> list[FieldGroup]:
+        local = np.full(n_t, -1, dtype=np.int64)
+        local[self.dense] = np.arange(self.dense.size)
+        groups = []
+        for g in fnet.groups:
+            sel = np.flatnonzero(local[g.transitions] >= 0)
+            if sel.size:
+                groups.append(
+                    FieldGroup(local[g.transitions[sel]], g.fields[sel], g.low[sel], g.exact[sel])
+                )
+        return groups
+
+    @staticmethod
+    def _lists(
+        trans: npt.NDArray[np.int64],
+        field: npt.NDArray[np.int64],
+        value: npt.NDArray[np.int64],
+        values: npt.NDArray[np.int64],
+    ) -> list[tuple[int, npt.NDArray[np.int64], npt.NDArray[np.int64]]]:
+        keyed = []
+        for f in np.unique(field).tolist():
+            sel = np.flatnonzero(field == f)
+            order = np.lexsort((trans[sel], value[sel]))
+            start = np.zeros(int(values[f]) + 1, dtype=np.int64)
+            start[1:] = np.cumsum(np.bincount(value[sel], minlength=int(values[f])))
+            keyed.append((int(f), start, trans[sel][order]))
+        return keyed
+
+    def candidates(self, cols: npt.NDArray[np.integer]) -> Edges:
+        """The (transition, column) pairs whose key test passes, per key field."""
+        n = cols.shape[1]
+        trans: list[npt.NDArray[np.int64]] = []
+        src: list[npt.NDArray[np.int64]] = []
+        for key, start, listed in self.keyed:
+            value = cols[key].astype(np.int64)
+            first = start.take(value)
+            count = start.take(value + 1) - first
+            total = int(count.sum())
+            if not total:
+                continue
+            offsets = np.cumsum(count) - count - first
+            trans.append(listed.take(np.arange(total) - np.repeat(offsets, count)))
+            src.append(np.repeat(np.arange(n), count))
+        if not trans:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return np.concatenate(trans), np.concatenate(src)
 
 
 class _Explorer:
     """The mutable state of one exploration; `explore` is its only user.
 
-    Frontier blocks are column-major, shape ``(places, n)``: gathering the rows of a
-    transition's input places is then a copy of contiguous memory, and enabling for a
-    block is a ``(transitions, n)`` boolean matrix.
+    Frontier blocks are column-major, shape ``(fields, n)`` (see
+    `analysis.encoding.FieldNet`): gathering the rows of a transition's input fields is
+    then a copy of contiguous memory, and enabling for a block is a
+    ``(transitions, n)`` boolean matrix.
     """
 
     def __init__(
@@ -240,120 +594,198 @@ class _Explorer:
         self.chunk = chunk
         self.clock = clock
         self.start = clock()
-        self.index_type = (
-            np.int32 if max_states is not None and max_states < np.iinfo(np.int32).max else np.int64
-        )
+        small = max_states is not None and max_states < np.iinfo(np.int32).max // 2
+        self.index_type = np.int32 if small else np.int64
         self.via_type = np.int16 if cn.n_transitions < np.iinfo(np.int16).max else np.int32
-        inc_t, inc_col = np.nonzero(cn.inc_places >= 0)
+        layout = Layout.initial_guess(cn, one_hot_components(cn))
+        self.fnet = fnet = FieldNet(cn, layout)
+        self.index = _EnablingIndex(fnet, layout, cn.n_transitions)
+        inc_t, inc_col = np.nonzero(fnet.inc_fields >= 0)
         self.inc_t = inc_t.astype(np.int64)
-        self.inc_p = cn.inc_places[inc_t, inc_col]
-        self.inc_amount = cn.inc_amounts[inc_t, inc_col]
-        self._set_layout(Layout.initial_guess(cn))
+        self.inc_f = fnet.inc_fields[inc_t, inc_col]
+        self.inc_amount = fnet.inc_amounts[inc_t, inc_col]
+        self.dense_delta = fnet.n_fields * cn.n_transitions <= DENSE_DELTA_CELLS
+        self.self_loops = np.flatnonzero(cn.self_loops)
+        self.count_fields = np.flatnonzero(~fnet.onehot)
+        self.onehot_fields = np.flatnonzero(fnet.onehot)
+        self._set_layout(layout)
         self.widenings = np.zeros(cn.n_places, dtype=np.int64)  # per place
-        self.store = KeyStore(self.layout.n_words)
-        self.parents: list[npt.NDArray[np.integer]] = [np.zeros(1, dtype=self.index_type)]
-        self.via: list[npt.NDArray[np.integer]] = [np.zeros(1, dtype=self.via_type)]
+        self.reserve = min(max_states or DEFAULT_RESERVE, RESERVE_LIMIT)
+        self.store = KeyStore(self.layout.n_words, wide_index=not small, reserve=self.reserve)
+        self.parents = Growable((), self.index_type, self.reserve)
+        self.via = Growable((), self.via_type, self.reserve)
+        self.parents.append(np.zeros(1, dtype=self.index_type))
+        self.via.append(np.zeros(1, dtype=self.via_type))
         self.dead: list[npt.NDArray[np.int64]] = []
         self.fired = np.zeros(cn.n_transitions, dtype=bool)
-        self.bounds = cn.initial.copy()
+        self.field_max = fnet.initial.copy()  # largest value of each count field
+        self.seen = np.zeros(fnet.n_seen, dtype=bool)  # (component, value) pairs met
+        self.seen[fnet.offsets[self.onehot_fields] + fnet.initial[self.onehot_fields]] = True
+        self.partial_fields = np.flatnonzero(fnet.partial)
+        self.tokens_exact = int(np.count_nonzero(fnet.exact))  # one token in each
         self.max_marking = int(cn.initial.sum())
         self.edges = 0
         self.layer_starts = [0]
         self.stopped: str | None = None
+        self.sleep = SleepSets(cn) if reducer is None and cn.n_transitions > 1 else None
+        self.sleep_next = False  # whether this layer computes the next one's sleep sets
+        self.next_sleep: list[npt.NDArray[np.uint64]] = []
 
     def _set_layout(self, layout: Layout) -> None:
-        cn = self.cn
+        cn, fnet = self.cn, self.fnet
         self.layout = layout
         self.dtype = row_dtype(layout, cn)
-        self.key_delta = layout.key_deltas(cn.delta)
-        self.key_pos = layout.key_deltas(np.maximum(cn.delta, 0))
-        self.key_neg = layout.key_deltas(np.maximum(-cn.delta, 0))
-        boundary = np.zeros(layout.n_words, dtype=np.uint64)
-        for p, width in enumerate(layout.bits):
-            boundary[layout.word[p]] |= np.uint64(1 << (int(layout.shift[p]) + width))
-        self.boundary = boundary
-        self.col_delta = np.ascontiguousarray(cn.delta.T.astype(self.dtype))
-        self.weights = [self._fit(g.weights)[:, :, None] for g in cn.groups]
-        limits = layout.limits
-        self.inc_threshold = (limits[self.inc_p] - self.inc_amount)[:, None]
-        padding = cn.inc_places < 0
+        self.key_delta = layout.key_deltas(cn.effects)
+        positive = cn.effects.values > 0
+        self.key_pos = layout.key_deltas(_masked(cn, positive, 1))
+        self.key_neg = layout.key_deltas(_masked(cn, ~positive, -1))
+        self.boundary = layout.boundary
+        if self.dense_delta:
+            dense = fnet.effects.dense(fnet.n_fields)
+            self.col_delta = np.ascontiguousarray(dense.T.astype(self.dtype))
+        self.tests = [self._tests(g) for g in fnet.groups]
+        self.dense_tests = [self._tests(g) for g in self.index.groups]
+        top = np.iinfo(self.dtype).max
+        self.rest_low = self.index.rest_low.astype(self.dtype)
+        span = np.where(self.index.rest_exact, 0, top).astype(self.dtype)
+        self.rest_span = span.view(_unsigned(self.dtype))
+        limits = np.left_shift(np.int64(1), np.asarray(layout.bits, dtype=np.int64))
+        limits[fnet.onehot] = NEVER
+        self.limits = limits
+        self.inc_threshold = (limits[self.inc_f] - self.inc_amount)[:, None]
+        padding = fnet.inc_fields < 0
         padded = np.append(limits, 0)  # index -1 (padding) lands on the extra 0
         self.edge_threshold = np.where(
-            padding, np.iinfo(np.int64).max, padded[cn.inc_places] - cn.inc_amounts
+            padding, np.iinfo(np.int64).max, padded[fnet.inc_fields] - fnet.inc_amounts
         )
-        self.at_risk_from = limits - cn.max_increase  # a count >= this may overflow
+        self.at_risk_from = limits - fnet.max_increase  # a value >= this may overflow
+        self._pad_presets()
 
-    def _fit(self, values: npt.NDArray[np.int64]) -> npt.NDArray[np.integer]:
-        """``values`` in the row dtype when they fit (fast compares), else as is."""
-        info = np.iinfo(self.dtype)
-        if values.size == 0 or (values.max() <= info.max and values.min() >= info.min):
-            return values.astype(self.dtype)
-        return values
+    def _pad_presets(self) -> None:
+        """The presets as ``(T, k)`` arrays for `enabled_few`: field ``n_fields`` is an
+        extra row of zeros, which the padding tests (``0 - 0 <= top``)."""
+        fnet = self.fnet
+        n_t = self.cn.n_transitions
+        width = max((g.fields.shape[1] for g in fnet.groups), default=0)
+        top = np.iinfo(self.dtype).max
+        fields = np.full((n_t, width), fnet.n_fields, dtype=np.int64)
+        low = np.zeros((n_t, width), dtype=np.int64)
+        span = np.full((n_t, width), top, dtype=np.int64)
+        for g in fnet.groups:
+            size = g.fields.shape[1]
+            fields[g.transitions, :size] = g.fields
+            low[g.transitions, :size] = g.low
+            span[g.transitions, :size] = np.where(g.exact, 0, top)
+        if width and fnet.never.size:  # 0 - 1 wraps to the top: never passes a span 0
+            low[fnet.never, -1], span[fnet.never, -1] = 1, 0
+            fields[fnet.never, -1] = fnet.n_fields
+        self.pad_width = width  # arrays below are (width, T) flattened: arc column major
+        self.pad_fields = fields.T.reshape(-1)
+        self.pad_low = low.T.astype(self.dtype).reshape(-1, 1)
+        unsigned = _unsigned(self.dtype)
+        self.pad_span = span.T.astype(self.dtype).view(unsigned).reshape(-1, 1)
+        self.last_value = np.minimum(self.limits - 1, np.iinfo(self.dtype).max)
+        self.last_value = self.last_value.astype(self.dtype)[:, None]
+
+    def _tests(self, group: FieldGroup) -> list[tuple[str, npt.NDArray[np.integer]]]:
+        """Per input column of ``group``: how to test it (``>=``, ``==``, or both kinds
+        at once as ``0 <= value - low <= span`` in unsigned arithmetic) and the
+        operand, in the row dtype."""
+        tests: list[tuple[str, npt.NDArray[np.integer]]] = []
+        top = np.iinfo(self.dtype).max
+        for k in range(group.fields.shape[1]):
+            low, exact = group.low[:, k], group.exact[:, k]
+            if not exact.any():
+                tests.append(("ge", low.astype(self.dtype)[:, None]))
+            elif exact.all():
+                tests.append(("eq", low.astype(self.dtype)[:, None]))
+            else:
+                span = np.where(exact, 0, top).astype(self.dtype).view(_unsigned(self.dtype))
+                tests.append(("in", np.stack([low.astype(self.dtype), span.view(self.dtype)])))
+        return tests
 
     # -- one step --------------------------------------------------------------------
 
     def enabled(self, cols: npt.NDArray[np.integer]) -> npt.NDArray[np.bool_]:
         """``(T, n)`` matrix: transition ``t`` enabled in marking column ``i``."""
-        out = np.empty((self.cn.n_transitions, cols.shape[1]), dtype=bool)
-        for group, weights in zip(self.cn.groups, self.weights, strict=True):
-            size = group.places.shape[1]
-            if size == 0:
-                out[group.transitions] = True
-                continue
-            ok = cols[group.places[:, 0]] >= weights[:, 0]
-            for k in range(1, size):
-                ok &= cols[group.places[:, k]] >= weights[:, k]
-            out[group.transitions] = ok
+        out = _group_matrix(cols, self.fnet.groups, self.tests, self.cn.n_transitions)
+        if self.fnet.never.size:
+            out[self.fnet.never] = False
         return out
+
+    def edges_of(self, cols: npt.NDArray[np.integer]) -> Edges:
+        """The enabled (transition, column) pairs of a block, without the ``(T, n)``
+        matrix for the transitions that test a component (`_EnablingIndex`): those are
+        looked up by the value of one field, then only their other input arcs are
+        tested. Transition-major when no transition is looked up, else in no particular
+        order (`fired_edges` sorts what it fires)."""
+        index = self.index
+        parts: list[Edges] = []
+        if index.dense.size:
+            matrix = _group_matrix(cols, index.groups, self.dense_tests, index.dense.size)
+            rows, src = _nonzero(matrix)
+            parts.append((index.dense.take(rows), src))
+        if not index.keyed:
+            return parts[0] if parts else (np.zeros(0, np.int64), np.zeros(0, np.int64))
+        n = cols.shape[1]
+        trans, src = index.candidates(cols)
+        if index.rest_width:
+            flat = np.concatenate([cols, np.zeros((1, n), dtype=self.dtype)]).reshape(-1)
+            ok: npt.NDArray[np.bool_] | None = None
+            for k in range(index.rest_width):
+                values = flat.take(index.rest_fields[k].take(trans) * n + src)
+                values -= self.rest_low[k].take(trans)
+                passed = values.view(_unsigned(self.dtype)) <= self.rest_span[k].take(trans)
+                ok = passed if ok is None else ok & passed
+            assert ok is not None
+            keep = np.flatnonzero(ok)
+            trans, src = trans.take(keep), src.take(keep)
+        parts.append((trans, src))
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
     def overflow(
         self,
         cols: npt.NDArray[np.integer],
         enabled: npt.NDArray[np.bool_],
-        edges: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
+        edges: Edges,
     ) -> dict[int, int]:
-        """Places whose bit field some enabled firing would overflow, each with the
+        """Places whose count field some enabled firing would overflow, each with the
         largest count it would reach; empty if none (the usual case).
 
-        Only places whose count in the block is close to the field limit are checked,
-        per increasing arc over the block or per edge, whichever touches fewer values.
+        Only fields whose value in the block is close to the limit are checked, per
+        increasing arc over the block or per edge, whichever touches fewer values.
         """
         risky = cols.max(axis=1, initial=0) >= self.at_risk_from
         if not risky.any():
             return {}
         trans, src = edges
-        arcs = np.flatnonzero(risky[self.inc_p])
-        if arcs.size * cols.shape[1] <= trans.size * self.cn.inc_places.shape[1]:
-            hit = cols[self.inc_p[arcs]] >= self.inc_threshold[arcs]
+        fnet = self.fnet
+        arcs = np.flatnonzero(risky[self.inc_f])
+        if arcs.size * cols.shape[1] <= trans.size * fnet.inc_fields.shape[1]:
+            hit = cols[self.inc_f[arcs]] >= self.inc_threshold[arcs]
             hit &= enabled[self.inc_t[arcs]]
             if not hit.any():
                 return {}
             arc, col = np.nonzero(hit)
-            places = self.inc_p[arcs[arc]]
+            fields = self.inc_f[arcs[arc]]
             amounts = self.inc_amount[arcs[arc]]
         else:
-            gathered = self.cn.inc_places[trans]
+            gathered = fnet.inc_fields[trans]
             values = cols[np.maximum(gathered, 0), src[:, None]]
             hit = values >= self.edge_threshold[trans]
             if not hit.any():
                 return {}
             edge, slot = np.nonzero(hit)
-            places = gathered[edge, slot]
-            amounts = self.cn.inc_amounts[trans[edge], slot]
+            fields = gathered[edge, slot]
+            amounts = fnet.inc_amounts[trans[edge], slot]
             col = src[edge]
-        reached = cols[places, col].astype(np.int64) + amounts
-        needed: dict[int, int] = {}
-        for p, v in zip(places.tolist(), reached.tolist(), strict=True):
-            needed[p] = max(needed.get(p, 0), v)
-        return needed
+        reached = cols[fields, col].astype(np.int64) + amounts
+        return _largest(fnet.count_place[fields], reached)
 
     def successor_keys(
-        self,
-        cols: npt.NDArray[np.integer],
-        base: int,
-        edges: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]],
+        self, cols: npt.NDArray[np.integer], parents: npt.NDArray[np.uint64], edges: Edges
     ) -> tuple[npt.NDArray[np.uint64] | None, dict[int, int]]:
-        """Keys of the successors along ``edges``, and the places whose bit field some
+        """Keys of the successors along ``edges``, and the places whose count field some
         firing overflows (as `overflow`); keys are ``None`` when that is not empty.
 
         When some count in the block is close to its field limit, the keys are
@@ -363,7 +795,7 @@ class _Explorer:
         all fields of all edges at once.
         """
         trans, src = edges
-        keys = self.store.keys.take(base + src, axis=0)
+        keys = parents.take(src, axis=0)
         risky = cols.max(axis=1, initial=0) >= self.at_risk_from
         if not risky.any():
             keys += self.key_delta.take(trans, axis=0)
@@ -378,35 +810,42 @@ class _Explorer:
             return keys, {}
         bad = np.flatnonzero(carries.any(axis=1))
         t_bad, s_bad = trans[bad], src[bad]
-        gathered = self.cn.inc_places[t_bad]
+        fnet = self.fnet
+        gathered = fnet.inc_fields[t_bad]
         reached = cols[np.maximum(gathered, 0), s_bad[:, None]].astype(np.int64)
-        reached += self.cn.inc_amounts[t_bad]
-        hit = (gathered >= 0) & (reached >= self.layout.limits[np.maximum(gathered, 0)])
-        needed: dict[int, int] = {}
-        for p, v in zip(gathered[hit].tolist(), reached[hit].tolist(), strict=True):
-            needed[p] = max(needed.get(p, 0), v)
+        reached += fnet.inc_amounts[t_bad]
+        hit = (gathered >= 0) & (reached >= self.limits[np.maximum(gathered, 0)])
+        needed = _largest(fnet.count_place[gathered[hit]], reached[hit])
         if not needed:  # cannot happen (a carry means an overflow); stay exact anyway
             return None, self.overflow(cols, self.enabled(cols), edges)
         return None, needed
 
+    def place_bounds(self) -> npt.NDArray[np.int64]:
+        """Most tokens each place held in a stored marking so far."""
+        fnet, layout = self.fnet, self.layout
+        bounds = np.zeros(self.cn.n_places, dtype=np.int64)
+        counts = self.count_fields
+        bounds[fnet.count_place[counts]] = self.field_max[counts]
+        bounds[fnet.onehot_places] = self.seen[fnet.seen_slot]
+        return bounds if layout.n_places else np.zeros(0, dtype=np.int64)
+
     def widen(self, needed: dict[int, int], blocks: list[npt.NDArray[np.integer]]) -> None:
         """Re-pack every stored key with wider fields for the ``needed`` places and
-        convert the frontier ``blocks`` (in place) to the new row dtype."""
-        layout = self.layout.widened(needed)
-        # Re-packing costs a pass over every stored key: widen, in the same pass, the
-        # other fields that were widened twice already and are half full again (counts
-        # that keep growing), if that costs at most one more key word. Only the packing
-        # changes, never a count.
+        convert the frontier ``blocks`` (in place) to the new row dtype. Only the
+        packing changes, never a count."""
+        # Every widening re-packs the whole store: widen in the same pass the counts
+        # that overflowed before and are half full again (they grow, and often in step
+        # with this one), and give spare bits to those that overflowed three times.
+        bounds = self.place_bounds()
+        half_full = bounds >= self.layout.limits // 2
+        again = np.flatnonzero(half_full & (self.widenings > 0))
+        needed = {**{p: 2 * int(bounds[p]) for p in again.tolist()}, **needed}
         for p in needed:
             self.widenings[p] += 1
-        growing = (self.widenings >= 2) & (self.bounds >= self.layout.limits // 2)
-        growing &= 2 * np.asarray(self.layout.bits, dtype=np.int64) <= MAX_FIELD_BITS
-        extra = {p: int(self.bounds[p]) for p in np.flatnonzero(growing).tolist()}
-        if extra:
-            ahead = self.layout.widened({**extra, **needed})
-            if ahead.n_words <= layout.n_words + 1:
-                layout = ahead
-        if max(layout.bits) > MAX_FIELD_BITS:
+        grown = np.flatnonzero((self.widenings > 2) & half_full)
+        growing = grown[np.argsort(-self.widenings[grown], kind="stable")].tolist()
+        layout = self.layout.widened(needed, growing)
+        if int(layout.count_bits.max(initial=0)) > MAX_FIELD_BITS:
             p = max(needed, key=lambda q: needed[q])
             name = self.cn.net.places[p].name
             self.stopped = (
@@ -414,58 +853,158 @@ class _Explorer:
                 " the net is unbounded"
             )
             raise _Stop
-        old, keys = self.layout, self.store.keys
-        packed = np.empty((keys.shape[0], layout.n_words), dtype=np.uint64)
-        step = 1 << 16
-        for s in range(0, keys.shape[0], step):
-            packed[s : s + step] = layout.pack(old.unpack(keys[s : s + step]))
+        packed = self.layout.repack(self.store.keys, layout)
         self._set_layout(layout)
-        self.store = KeyStore.of(packed)
+        self.store.rekey(packed)
         for i, block in enumerate(blocks):
             blocks[i] = block.astype(self.dtype)
+
+    def enabled_few(self, cols: npt.NDArray[np.integer]) -> npt.NDArray[np.bool_]:
+        """`enabled` in a fixed handful of numpy calls, for few markings: every preset
+        padded to the largest size (with a test that always passes, or never for the
+        transitions that can never be enabled), one gather, one test per arc, and an
+        AND over the ``k`` arc columns (outermost axis: contiguous blocks)."""
+        n_t, width = self.cn.n_transitions, self.pad_width
+        if not width:
+            out = np.ones((n_t, cols.shape[1]), dtype=bool)
+            out[self.fnet.never] = False
+            return out
+        extended = np.concatenate([cols, np.zeros((1, cols.shape[1]), dtype=self.dtype)])
+        values = extended.take(self.pad_fields, axis=0)
+        values -= self.pad_low
+        ok = values.view(_unsigned(self.dtype)) <= self.pad_span
+        enabled: npt.NDArray[np.bool_] = np.logical_and.reduce(ok.reshape(width, n_t, -1))
+        return enabled
+
+    def successor_cols(
+        self,
+        cols: npt.NDArray[np.integer],
+        src: npt.NDArray[np.int64],
+        trans: npt.NDArray[np.int64],
+    ) -> npt.NDArray[np.integer]:
+        """Field columns of the successors of ``cols[:, src]`` by ``trans``."""
+        new = cols.take(src, axis=1)
+        if self.dense_delta:
+            new += self.col_delta.take(trans, axis=1)
+            return new
+        effects = self.fnet.effects
+        owner, entry = effects.expand(trans)
+        fields = effects.places.take(entry)
+        new[fields, owner] += effects.values.take(entry).astype(self.dtype)
+        return new
+
+    def record(self, new: npt.NDArray[np.integer]) -> None:
+        """Update the bounds and the largest marking with new field columns."""
+        counts = new.take(self.count_fields, axis=0)
+        if counts.size:
+            top = counts.max(axis=1)
+            self.field_max[self.count_fields] = np.maximum(self.field_max[self.count_fields], top)
+            total = int(counts.sum(axis=0, dtype=np.int64).max())
+        else:
+            total = 0
+        if self.partial_fields.size and new.shape[1]:  # those components may be empty
+            held = new.take(self.partial_fields, axis=0) != 0
+            total = int((counts.sum(axis=0, dtype=np.int64) + held.sum(axis=0)).max())
+        self.max_marking = max(self.max_marking, self.tokens_exact + total)
+        if self.onehot_fields.size and new.shape[1]:
+            values = new.take(self.onehot_fields, axis=0).astype(np.int64)
+            values += self.fnet.offsets[self.onehot_fields][:, None]
+            self.seen[values.reshape(-1)] = True
 
     def insert(
         self,
         cols: npt.NDArray[np.integer],
         base: int,
-        src: npt.NDArray[np.int64],
-        trans: npt.NDArray[np.int64],
+        edges: Edges,
         out: list[npt.NDArray[np.integer]],
         keys: npt.NDArray[np.uint64] | None = None,
+        want_ids: bool = False,
     ) -> Added:
-        """Store the successors of edges ``(src, trans)`` (their ``keys`` if already
-        computed); new columns go to ``out``."""
+        """Store the successors along ``edges`` (their ``keys`` if already computed);
+        new columns go to ``out``."""
+        trans, src = edges
         if keys is None:
             keys = self.store.keys.take(base + src, axis=0)
             keys += self.key_delta.take(trans, axis=0)
         limit = None if self.max_states is None else self.max_states - self.store.size
-        added = self.store.add(keys, limit)
+        added = self.store.add(keys, limit, want_ids)
         first = added.first
         if first.size:
-            self.parents.append((base + src[first]).astype(self.index_type))
-            self.via.append(trans[first].astype(self.via_type))
-            new = cols.take(src[first], axis=1)
-            new += self.col_delta.take(trans[first], axis=1)
+            self.parents.append((base + src.take(first)).astype(self.index_type))
+            self.via.append(trans.take(first).astype(self.via_type))
+            new = self.successor_cols(cols, src.take(first), trans.take(first))
             out.append(new)
-            self.bounds = np.maximum(self.bounds, new.max(axis=1))
-            self.max_marking = max(self.max_marking, int(new.sum(axis=0, dtype=np.int64).max()))
+            self.record(new)
         if added.cut:
             self.stopped = f"state budget reached (max_states={self.max_states})"
         return added
 
+    def fired_edges(self, edges: Edges, sleep: npt.NDArray[np.uint64] | None, width: int) -> Edges:
+        """The edges to fire: not asleep, not a self-loop; in (source, transition)
+        order when the next layer gets sleep sets."""
+        trans, src = edges
+        keep = None
+        if sleep is not None and self.sleep is not None:
+            keep = self.sleep.awake(sleep, edges)
+        if self.self_loops.size:
+            loops = self.cn.self_loops.take(trans)
+            keep = ~loops if keep is None else keep & ~loops
+        if keep is not None:
+            chosen = np.flatnonzero(keep)
+            trans, src = trans.take(chosen), src.take(chosen)
+        if self.sleep_next:
+            # (source, transition) order: stable radix sorts on 16 bits, by transition
+            # (unless the edges come transition-major already), then by source.
+            if self.index.keyed:
+                order = np.argsort(_small(trans, self.cn.n_transitions), kind="stable")
+                trans, src = trans.take(order), src.take(order)
+            order = np.argsort(_small(src, width), kind="stable")
+            trans, src = trans.take(order), src.take(order)
+        return trans, src
+
     def step(
-        self, cols: npt.NDArray[np.integer], base: int, out: list[npt.NDArray[np.integer]]
+        self,
+        cols: npt.NDArray[np.integer],
+        sleep: npt.NDArray[np.uint64] | None,
+        base: int,
+        out: list[npt.NDArray[np.integer]],
     ) -> npt.NDArray[np.integer]:
-        """Expand the frontier block ``cols`` (states ``base ...``); returns ``cols`` in
-        the current row dtype (it changes when fields widen)."""
+        """Expand the frontier block ``cols`` (states ``base ...``, sleep sets
+        ``sleep``); returns ``cols`` in the current row dtype (it changes when fields
+        widen)."""
         keys = None
+        fired: Edges | None = None
+        if self.reducer is not None:
+            return self.reduced_step(cols, base, out)
+        while True:
+            edges = self.edges_of(cols)
+            fired = self.fired_edges(edges, sleep, cols.shape[1])
+            parents = self.store.keys[base : base + cols.shape[1]]
+            keys, needed = self.successor_keys(cols, parents, fired)
+            if not needed:
+                break
+            blocks = [cols, *out]
+            self.widen(needed, blocks)
+            cols, out[:] = blocks[0], blocks[1:]
+        self.fired[edges[0]] = True
+        self.account(np.bincount(edges[1], minlength=cols.shape[1]), base)
+        added = self.insert(cols, base, fired, out, keys)
+        if self.sleep_next and self.sleep is not None and added.first.size:
+            self.next_sleep.append(self.sleep.successors(sleep, fired, added.first))
+        return cols
+
+    def reduced_step(
+        self,
+        cols: npt.NDArray[np.integer],
+        base: int,
+        out: list[npt.NDArray[np.integer]],
+    ) -> npt.NDArray[np.integer]:
+        """`step` with partial-order reduction: fire a stubborn subset of the enabled
+        transitions of each marking (needs the whole enabled matrix)."""
+        assert self.reducer is not None
         while True:
             enabled = self.enabled(cols)
-            edges = _nonzero(enabled)
-            if self.reducer is None:
-                keys, needed = self.successor_keys(cols, base, edges)
-            else:
-                needed = self.overflow(cols, enabled, edges)
+            needed = self.overflow(cols, enabled, _nonzero(enabled))
             if not needed:
                 break
             blocks = [cols, *out]
@@ -475,23 +1014,21 @@ class _Explorer:
         self.fired |= enabled.any(axis=1)
         if not any_enabled.all():
             self.dead.append(base + np.flatnonzero(~any_enabled))
-        if self.reducer is None:
-            trans, src = edges
-            self.edges += src.size
-            self.insert(cols, base, src, trans, out, keys)
-            return cols
-        reduced = self.reducer.reduce(cols, enabled)
+        reduced = self.reducer.reduce(self.fnet.places(cols, self.layout), enabled)
         rtrans, rsrc = _nonzero(reduced)
         self.edges += rsrc.size
-        added = self.insert(cols, base, rsrc, rtrans, out)
+        added = self.insert(cols, base, (rtrans, rsrc), out, want_ids=True)
         if not self.reducer.needs_proviso or self.stopped:
             return cols
         # Cycle proviso: a marking whose reduced successors include one that was known
         # before it was expanded (stored earlier, or found first by another marking of
         # this block) is expanded fully, so every cycle of the reduced graph has a fully
         # expanded marking and no visible change is postponed forever.
-        stale = added.known.copy()
-        stale[added.unknown] = rsrc[added.leader] != rsrc[added.unknown]
+        assert added.ids is not None
+        ids = added.ids
+        stale = ids < added.start
+        new = np.flatnonzero(~stale)
+        stale[new] = rsrc[added.first[ids[new] - added.start]] != rsrc[new]
         redo = np.zeros(cols.shape[1], dtype=bool)
         redo[rsrc[stale]] = True
         redo &= (reduced != enabled).any(axis=0)
@@ -500,32 +1037,136 @@ class _Explorer:
             extra[:, ~redo] = False
             etrans, esrc = _nonzero(extra)
             self.edges += esrc.size
-            self.insert(cols, base, esrc, etrans, out)
+            self.insert(cols, base, (etrans, esrc), out)
         return cols
 
     # -- the loop --------------------------------------------------------------------
 
     def run(self) -> None:
-        cn = self.cn
-        self.store.add(self.layout.pack(cn.initial[None, :]))
-        frontier = cn.initial[:, None].astype(self.dtype)
+        self.store.add(self.layout.pack(self.cn.initial[None, :]))
+        # A layer is a list of column blocks (as produced, never joined into one array:
+        # the widest layers are the largest temporaries) with their sleep sets.
+        layer: list[npt.NDArray[np.integer]] = [self.fnet.initial[:, None].astype(self.dtype)]
+        sleeps: list[npt.NDArray[np.uint64]] | None = None
         base = 0
-        while frontier.shape[1]:
+        while layer:
+            width = sum(block.shape[1] for block in layer)
+            if self.narrow(width):
+                frontier = np.concatenate([b.astype(self.dtype, copy=False) for b in layer], 1)
+                frontier, base = self.narrow_round(frontier, base)
+                layer, sleeps = ([frontier] if frontier.shape[1] else []), None
+                continue
             out: list[npt.NDArray[np.integer]] = []
-            width, c = frontier.shape[1], 0
-            while c < width:
-                size = self.block_size()
-                cols = self.step(frontier[:, c : c + size], base + c, out)
-                frontier = frontier.astype(self.dtype, copy=False)
-                if self.stopped:
-                    raise _Stop
-                c += cols.shape[1]
-                self.check_time(width - c, out)
+            self.next_sleep = []
+            self.sleep_next = self.sleep is not None and self.edges >= SLEEP_MIN_DEGREE * base
+            done = 0
+            for k in range(len(layer)):
+                block, layer[k] = layer[k], layer[k][:, :0]  # let expanded blocks go
+                sleep = None if sleeps is None else sleeps[k]
+                c = 0
+                while c < block.shape[1]:
+                    size = self.block_size()
+                    cols = block[:, c : c + size].astype(self.dtype, copy=False)
+                    part = None if sleep is None else sleep[c : c + size]
+                    cols = self.step(cols, part, base + done + c, out)
+                    if self.stopped:
+                        raise _Stop
+                    c += cols.shape[1]
+                    self.check_time(width - done - c, out)
+                done += block.shape[1]
             base += width
-            if not out:
-                break
-            frontier = np.concatenate([b.astype(self.dtype, copy=False) for b in out], axis=1)
-            self.layer_starts.append(base)
+            sleeps = self.next_sleep if self.sleep_next else None
+            layer, sleeps = _coalesce(out, sleeps, self.block_size())
+            if layer:
+                self.layer_starts.append(base)
+
+    def narrow(self, width: int) -> bool:
+        """Whether a layer of ``width`` markings is explored by a narrow round: few
+        markings, and an enabled matrix small enough to compute at once."""
+        few = width <= NARROW_WIDTH and width * self.cn.n_transitions <= CELLS_PER_STEP
+        return few and self.reducer is None
+
+    def speculate(self, cols: npt.NDArray[np.integer], base: int) -> _Round:
+        """Expand the narrow layer ``cols`` (states ``base ...``) and then its successors,
+        level after level, without asking the store whether they are new: as long as
+        the candidates stay few, a level costs a couple of dozen small numpy calls and
+        no hashing. Level ``j`` holds every successor of level ``j - 1`` (known or not),
+        so it contains the whole BFS layer ``j`` below ``cols``, and a key's first level
+        is its depth. The last level is not expanded."""
+        while True:
+            spec = _Round()
+            current, keys = cols, self.store.keys[base : base + cols.shape[1]]
+            budget = min(NARROW_CANDIDATES, self.chunk)  # `chunk` bounds work between checks
+            needed: dict[int, int] = {}
+            n_t = self.cn.n_transitions
+            while len(spec.keys) < NARROW_LEVELS:
+                if spec.keys and current.shape[1] * n_t > CELLS_PER_STEP:
+                    break  # too wide to expand in one go: the next frontier
+                enabled = self.enabled_few(current)
+                every = _nonzero(enabled)
+                counts = np.bincount(every[1], minlength=current.shape[1])
+                trans, src = self.fired_edges(every, None, current.shape[1])
+                new = self.successor_cols(current, src, trans)
+                over = new > self.last_value
+                if over.any():
+                    field, col = np.nonzero(over)
+                    reached = new[field, col].astype(np.int64)
+                    needed = _largest(self.fnet.count_place[field], reached)
+                    break
+                self.fired[every[0]] = True
+                keys = keys.take(src, axis=0)
+                keys += self.key_delta.take(trans, axis=0)
+                spec.add(counts, new, keys, src, trans, enabled.size)
+                current = new
+                if not src.size or spec.total >= budget or spec.cells >= CELLS_PER_STEP:
+                    break
+            if spec.keys or not needed:
+                return spec
+            blocks = [cols]
+            self.widen(needed, blocks)
+            cols = blocks[0]
+
+    def narrow_round(
+        self, cols: npt.NDArray[np.integer], base: int
+    ) -> tuple[npt.NDArray[np.integer], int]:
+        """Explore several BFS layers below the narrow layer ``cols`` (states
+        ``base ...``) with one insertion into the store (see `speculate`); returns the
+        next frontier and its first state number."""
+        self.sleep_next = False
+        spec = self.speculate(cols, base)
+        keys, new_cols, parent, trans, counts = spec.joined()
+        limit = None if self.max_states is None else self.max_states - self.store.size
+        added = self.store.add(keys, limit, want_ids=True)
+        assert added.ids is not None
+        first, start = added.first, added.start
+        self.account(spec.counts[0], base)
+        ref = parent.take(first)
+        found = np.where(ref >= 0, added.ids.take(np.maximum(ref, 0)), base - 1 - ref)
+        self.parents.append(found.astype(self.index_type))
+        self.via.append(trans.take(first).astype(self.via_type))
+        new = new_cols.take(first, axis=1)
+        self.record(new)
+        enables = counts.take(first)
+        expanded = int(np.count_nonzero(enables >= 0))  # all but the last level's
+        self.account(enables[:expanded], start)
+        cut = np.searchsorted(first, spec.ends)
+        for j in range(len(spec.ends)):
+            if cut[j] > (cut[j - 1] if j else 0):
+                self.layer_starts.append(start + (int(cut[j - 1]) if j else 0))
+        if added.cut:
+            self.stopped = f"state budget reached (max_states={self.max_states})"
+            raise _Stop
+        frontier = new[:, expanded:]
+        self.check_time(frontier.shape[1], [])
+        return frontier, start + expanded
+
+    def account(self, counts: npt.NDArray[np.int64], start: int) -> None:
+        """Edges and dead markings of states ``start ...`` that enable ``counts``
+        transitions each."""
+        self.edges += int(counts.sum())
+        dead = np.flatnonzero(counts == 0)
+        if dead.size:
+            self.dead.append(start + dead)
 
     def block_size(self) -> int:
         """Frontier columns for the next step: ``chunk``, fewer on nets with many
@@ -547,6 +1188,102 @@ class _Explorer:
         if self.time_limit is not None and now > self.time_limit:
             self.stopped = f"time limit reached ({self.time_limit:g} s)"
             raise _Stop
+
+
+def _unsigned(dtype: np.dtype[np.integer]) -> np.dtype[np.unsignedinteger]:
+    return np.dtype(f"u{dtype.itemsize}")
+
+
+def _test(
+    values: npt.NDArray[np.integer], test: tuple[str, npt.NDArray[np.integer]]
+) -> npt.NDArray[np.bool_]:
+    """One input column of a group: which (transition, marking) pairs pass."""
+    kind, operand = test
+    if kind == "ge":
+        ge: npt.NDArray[np.bool_] = values >= operand
+        return ge
+    if kind == "eq":
+        eq: npt.NDArray[np.bool_] = values == operand
+        return eq
+    values -= operand[0][:, None]
+    unsigned = _unsigned(values.dtype)
+    inside: npt.NDArray[np.bool_] = values.view(unsigned) <= operand[1].view(unsigned)[:, None]
+    return inside
+
+
+def _small(values: npt.NDArray[np.int64], bound: int) -> npt.NDArray[np.integer]:
+    """``values`` (all below ``bound``) as ``uint16`` when they fit: numpy sorts 16-bit
+    keys stably with a radix sort, several times faster than 64-bit ones."""
+    return values.astype(np.uint16) if bound <= 1 << 16 else values
+
+
+def _group_matrix(
+    cols: npt.NDArray[np.integer],
+    groups: Sequence[FieldGroup],
+    tests: Sequence[list[tuple[str, npt.NDArray[np.integer]]]],
+    rows: int,
+) -> npt.NDArray[np.bool_]:
+    """``(rows, n)`` enabled matrix of the transitions of ``groups`` (numbered by
+    ``group.transitions``), one gather and one test per input column of a group."""
+    out = np.empty((rows, cols.shape[1]), dtype=bool)
+    for group, checks in zip(groups, tests, strict=True):
+        if not checks:
+            out[group.transitions] = True
+            continue
+        ok = _test(cols.take(group.fields[:, 0], axis=0), checks[0])
+        for k in range(1, len(checks)):
+            ok &= _test(cols.take(group.fields[:, k], axis=0), checks[k])
+        out[group.transitions] = ok
+    return out
+
+
+def _coalesce(
+    blocks: list[npt.NDArray[np.integer]],
+    sleeps: list[npt.NDArray[np.uint64]] | None,
+    size: int,
+) -> tuple[list[npt.NDArray[np.integer]], list[npt.NDArray[np.uint64]] | None]:
+    """The blocks of a new layer (one per step that found states, often small) joined
+    into runs of about ``size`` columns: fewer, larger steps for the next layer, without
+    copying the widest layers whole."""
+    joined: list[npt.NDArray[np.integer]] = []
+    joined_sleeps: list[npt.NDArray[np.uint64]] = []
+    start = width = 0
+    for k, block in enumerate(blocks):
+        width += block.shape[1]
+        if width >= size or k == len(blocks) - 1:
+            run = blocks[start : k + 1]
+            joined.append(run[0] if len(run) == 1 else np.concatenate(run, axis=1))
+            if sleeps is not None:
+                part = sleeps[start : k + 1]
+                joined_sleeps.append(part[0] if len(part) == 1 else np.concatenate(part))
+            start, width = k + 1, 0
+    return joined, (joined_sleeps if sleeps is not None else None)
+
+
+def _settle_allocator() -> None:
+    """Allocate and free one 30 MB block, once per exploration.
+
+    glibc serves blocks above its *mmap threshold* (128 KB at start) with fresh pages
+    from the kernel and returns them on free; it raises the threshold (up to 32 MB) only
+    after such a block is freed. Until then every temporary of a vectorised step costs
+    page faults on every use, which on the reference machine is the price of writing
+    the memory many times over. Freeing one large block moves glibc to the steady state
+    it reaches by itself later (elsewhere this is just an allocation)."""
+    np.empty(30 << 20, dtype=np.uint8)
+
+
+def _largest(places: npt.NDArray[np.int64], reached: npt.NDArray[np.int64]) -> dict[int, int]:
+    """``{place: largest count reached}`` over parallel arrays."""
+    needed: dict[int, int] = {}
+    for p, v in zip(places.tolist(), reached.tolist(), strict=True):
+        needed[p] = max(needed.get(p, 0), v)
+    return needed
+
+
+def _masked(cn: CompactNet, select: npt.NDArray[np.bool_], sign: int) -> Arcs:
+    """The effect arcs ``select``-ed, times ``sign`` (the others zero)."""
+    effects = cn.effects
+    return Arcs(effects.indptr, effects.places, np.where(select, sign * effects.values, 0))
 
 
 def explore(
@@ -575,7 +1312,8 @@ def explore(
             graph would.
         progress: called after every chunk with a `ProgressInfo`
             (see `analysis.progress.ProgressPrinter`).
-        chunk: frontier rows per vectorised step.
+        chunk: frontier rows per vectorised step (and most candidates of a narrow
+            round), i.e. the work between two `time_limit`/`progress` checks.
         clock: seconds counter; tests pass a fake one.
 
     Returns:
@@ -587,20 +1325,22 @@ def explore(
     if por:
         vis = None if visible is None else [cn.net.place_index(p) for p in visible]
         reducer = StubbornSets(cn, vis)
+    _settle_allocator()
     explorer = _Explorer(cn, max_states, time_limit, reducer, progress, chunk, clock)
     with contextlib.suppress(_Stop):  # a budget ran out; the reason is recorded
         explorer.run()
     seconds = clock() - explorer.start
     store = explorer.store
-    parents = np.concatenate(explorer.parents)[: store.size]
-    via = np.concatenate(explorer.via)[: store.size]
+    parents = explorer.parents.view[: store.size]
+    via = explorer.via.view[: store.size]
     dead = np.concatenate(explorer.dead) if explorer.dead else np.zeros(0, dtype=np.int64)
+    bounds = explorer.place_bounds()
     return StateSpace(
         net=cn.net,
         states=store.size,
         edges=explorer.edges,
-        place_bounds=explorer.bounds,
-        max_tokens_place=int(explorer.bounds.max(initial=0)),
+        place_bounds=bounds,
+        max_tokens_place=int(bounds.max(initial=0)),
         max_tokens_marking=explorer.max_marking,
         deadlocks=np.sort(dead),
         fired_transitions=explorer.fired,

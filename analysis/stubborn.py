@@ -54,25 +54,32 @@ class StubbornSets:
     """
 
     def __init__(self, cn: CompactNet, visible: Sequence[int] | None = None) -> None:
-        pre, delta = cn.pre, cn.delta
-        n_t = cn.n_transitions
+        n_t, n_p = cn.n_transitions, cn.n_places
         self.needs_proviso = visible is not None
+        inputs, effects = cn.inputs, cn.effects
+        # From the sparse arcs only: a mission can be too large for dense matrices.
         self.preset: list[list[tuple[int, int]]] = [
-            [(int(p), int(pre[t, p])) for p in np.flatnonzero(pre[t])] for t in range(n_t)
+            list(zip(inputs.places[a:b].tolist(), inputs.values[a:b].tolist(), strict=True))
+            for a, b in zip(inputs.indptr[:-1].tolist(), inputs.indptr[1:].tolist(), strict=True)
         ]
-        consumers = [np.flatnonzero(pre[:, p]).tolist() for p in range(cn.n_places)]
+        consumers: list[list[int]] = [[] for _ in range(n_p)]
+        for t, p in zip(inputs.rows.tolist(), inputs.places.tolist(), strict=True):
+            consumers[p].append(t)
         self.conflicts: list[list[int]] = [
             sorted({u for p, _ in self.preset[t] for u in consumers[p]}) for t in range(n_t)
         ]
-        self.producers: list[list[int]] = [
-            np.flatnonzero(delta[:, p] > 0).tolist() for p in range(cn.n_places)
-        ]
+        self.producers: list[list[int]] = [[] for _ in range(n_p)]
+        raised = effects.values > 0
+        for t, p in zip(
+            effects.rows[raised].tolist(), effects.places[raised].tolist(), strict=True
+        ):
+            self.producers[p].append(t)
         if visible is None:
             self.visible: set[int] = set()
         else:
-            cols = np.asarray(list(visible), dtype=np.int64)
-            changes = (delta[:, cols] != 0).any(axis=1) if cols.size else np.zeros(n_t, bool)
-            self.visible = set(np.flatnonzero(changes).tolist())
+            watched = np.zeros(n_p, dtype=bool)
+            watched[np.asarray(list(visible), dtype=np.int64)] = True
+            self.visible = set(np.unique(effects.rows[watched[effects.places]]).tolist())
 
     def _closure(
         self, seeds: Sequence[int], marking: list[int], enabled: set[int], give_up: int

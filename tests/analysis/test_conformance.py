@@ -11,11 +11,14 @@ from __future__ import annotations
 from functools import cache
 from typing import Any
 
+import numpy as np
 import pytest
 import yaml
 
 from analysis.statespace import StateSpace, explore
 from coral_lang.pnml import read_pnml
+from tests.analysis.test_statespace import MODES
+from tests.analysis.test_statespace import _mode as explorer_mode
 from tests.conftest import CONFORMANCE
 
 MAX_TEST_STATES = 300_000
@@ -93,3 +96,39 @@ def test_dead_markings_have_shortest_traces_that_replay(name: str) -> None:
         assert marking == space.marking(index)
         assert len(trace) == space.depth_of(index)
         assert not any(net.enabled(marking, tr) for tr in net.transitions)
+
+
+# Models whose places form components (most transitions then enabled by lookup in the
+# "indexed" mode), small enough to explore in every mode of the explorer.
+MODE_MODELS = [
+    "Peterson-PT-2",
+    "TokenRing-PT-010",
+    "Dekker-PT-010",
+    "SharedMemory-PT-000005",
+    "Philosophers-PT-000010",
+    "DoubleExponent-PT-002",
+    "Referendum-PT-0010",
+    "Anderson-PT-04",
+]
+
+
+@pytest.mark.parametrize("mode", sorted(MODES))
+@pytest.mark.parametrize("name", [_param(n) for n in MODE_MODELS if n in MODELS])
+def test_every_mode_matches_the_oracle(name: str, mode: str) -> None:
+    oracle = MODELS[name]
+    net = read_pnml(CONFORMANCE / oracle["pnml"])
+    with explorer_mode(mode):
+        space = explore(net, max_states=2 * MAX_TEST_STATES, chunk=4096)
+    found = {
+        "states": space.states,
+        "edges": space.edges,
+        "max_tokens_place": space.max_tokens_place,
+        "max_tokens_marking": space.max_tokens_marking,
+        "deadlock": space.has_deadlock,
+    }
+    expected = {key: oracle[key] for key in found if oracle.get(key) is not None}
+    assert {key: found[key] for key in expected} == expected
+    default = _explored(name)
+    assert space.place_bounds.tolist() == default.place_bounds.tolist()
+    assert space.fired_transitions.tolist() == default.fired_transitions.tolist()
+    assert np.array_equal(np.diff(space.layer_starts), np.diff(default.layer_starts))

@@ -3,8 +3,12 @@ overflow handling, predicates, traces and graph export."""
 
 from __future__ import annotations
 
+import contextlib
 import io
 import itertools
+from collections.abc import Iterator
+from typing import Any
+from unittest import mock
 
 import networkx as nx
 import numpy as np
@@ -12,6 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import analysis.encoding as encoding
 import analysis.statespace as statespace
 from analysis.encoding import CompactNet, KeyStore, Layout
 from analysis.graph import to_networkx
@@ -209,7 +214,7 @@ def test_layout_packs_and_unpacks_markings() -> None:
     layout = Layout.for_bits([1, 63, 5, 40, 40])
     rows = np.array([[1, (1 << 63) - 1, 31, 0, (1 << 40) - 1], [0, 0, 0, 7, 9]], dtype=np.uint64)
     keys = layout.pack(rows)
-    assert layout.n_words == 4
+    assert layout.n_words == 3  # widest first: [63], [40, 5, 1], [40]
     assert (keys >> np.uint64(63) == 0).all()
     assert layout.unpack(keys, np.uint64).tolist() == rows.tolist()
 
@@ -264,24 +269,27 @@ def test_degenerate_nets() -> None:
     assert idle.marking(0) == (3,) and idle.ever_marked.tolist() == [True]
 
 
-def test_wide_markings_hash_with_whole_arrays_and_stay_exact() -> None:
-    from analysis.encoding import WIDE_KEYS
-
-    # A token walking a 600-place chain while another toggles between two places:
-    # 1,200 states, each marking packed into at least WIDE_KEYS 64-bit words.
-    chain = [Place(f"c{i}", initial=1 if i == 0 else 0) for i in range(600)]
-    places = (*chain, Place("a", initial=1), Place("b"))
+def _walker(length: int, leak: bool) -> Net:
+    """A token walking a ``length``-place chain while another toggles between two
+    places: ``2 * length`` states. With ``leak``, a never-enabled transition adds a token
+    to the chain, so the chain is no longer a one-hot component."""
+    chain = [Place(f"c{i}", initial=1 if i == 0 else 0) for i in range(length)]
+    places = (*chain, Place("a", initial=1), Place("b"), Place("z"))
     transitions = [
         Transition(f"step{i}", inputs=((f"c{i}", 1),), outputs=((f"c{i + 1}", 1),))
-        for i in range(599)
+        for i in range(length - 1)
     ]
     transitions += [
         Transition("ab", inputs=(("a", 1),), outputs=(("b", 1),)),
         Transition("ba", inputs=(("b", 1),), outputs=(("a", 1),)),
     ]
-    net = Net("wide", places, tuple(transitions))
-    space = explore(net)
-    assert space.layout.n_words >= WIDE_KEYS
+    if leak:
+        leak_arcs = (("c5", 1), ("z", 1))
+        transitions.append(Transition("leak", inputs=(("z", 1),), outputs=leak_arcs))
+    return Net("wide", places, tuple(transitions))
+
+
+def _agrees_on_walker(net: Net, space: StateSpace) -> None:
     reference = explore_reference(net, max_states=5_000)
     assert space.complete and reference.complete
     assert (
@@ -290,3 +298,207 @@ def test_wide_markings_hash_with_whole_arrays_and_stay_exact() -> None:
         == (1200, 1200 + 599 * 2)
     )
     assert {space.marking(i) for i in range(space.states)} == set(reference.states)
+
+
+def test_wide_markings_hash_with_whole_arrays_and_stay_exact() -> None:
+    from analysis.encoding import WIDE_KEYS
+
+    # 603 places, one count field each: at least WIDE_KEYS 64-bit words per marking.
+    net = _walker(600, leak=True)
+    space = explore(net)
+    assert space.layout.n_words >= WIDE_KEYS
+    _agrees_on_walker(net, space)
+
+
+def test_one_hot_components_pack_a_walking_token_into_a_few_bits() -> None:
+    net = _walker(600, leak=False)
+    space = explore(net)
+    # The chain (600 places, one token) and {a, b} are one-hot components; z is a count.
+    assert space.layout.n_words == 1
+    assert sorted(space.layout.bits) == [1, 1, 10]
+    _agrees_on_walker(net, space)
+
+
+# -- every strategy of the explorer against the reference ---------------------------------
+
+MODES: dict[str, dict[str, float]] = {
+    # layer by layer, sleep sets on from the first layer (no narrow rounds)
+    "wide": {"NARROW_WIDTH": 0, "SLEEP_MIN_DEGREE": 0.0},
+    # layer by layer, every edge fired
+    "wide, no sleep sets": {"NARROW_WIDTH": 0, "SLEEP_MIN_DEGREE": float("inf")},
+    # several layers per insertion, whatever the width
+    "narrow": {"NARROW_WIDTH": 1 << 30},
+    # successor columns from the sparse effects
+    "sparse effects": {"NARROW_WIDTH": 0, "SLEEP_MIN_DEGREE": 0.0, "DENSE_DELTA_CELLS": 0},
+    # transitions testing a component looked up by its value, on any net
+    "indexed": {"NARROW_WIDTH": 0, "SLEEP_MIN_DEGREE": 0.0, "KEYED_MIN": 0, "KEYED_SHARE": 0.0},
+}
+
+
+@contextlib.contextmanager
+def _mode(name: str, components: bool = True) -> Iterator[None]:
+    with contextlib.ExitStack() as stack:
+        for attribute, value in MODES[name].items():
+            stack.enter_context(mock.patch.object(statespace, attribute, value))
+        if not components:
+            stack.enter_context(mock.patch.object(statespace, "one_hot_components", _none))
+        yield
+
+
+def _none(cn: CompactNet) -> list[encoding.Component]:
+    return []
+
+
+@settings(max_examples=400)
+@given(
+    small_nets(max_places=7, max_transitions=9),
+    st.sampled_from(sorted(MODES)),
+    st.sampled_from([1, 3, 17, 1 << 15]),
+    st.booleans(),
+)
+def test_every_mode_agrees_with_the_reference(
+    net: Net, mode: str, chunk: int, components: bool
+) -> None:
+    ref = explore_reference(net, max_states=BUDGET)
+    with _mode(mode, components):
+        space = explore(net, max_states=BUDGET, chunk=chunk)
+    if not ref.complete:
+        assert not space.complete and space.states == BUDGET
+        return
+    assert space.complete, space.stopped_reason
+    _agree(space, ref, net)
+
+
+def _count_fired(net: Net, mode: str) -> tuple[StateSpace, int]:
+    fired = 0
+    insert = statespace._Explorer.insert
+
+    def counting(self: Any, cols: Any, base: int, edges: Any, *args: Any, **kw: Any) -> Any:
+        nonlocal fired
+        fired += edges[0].size
+        return insert(self, cols, base, edges, *args, **kw)
+
+    with _mode(mode), mock.patch.object(statespace._Explorer, "insert", counting):
+        space = explore(net)
+    return space, fired
+
+
+def test_sleep_sets_fire_about_one_edge_per_state_on_independent_transitions() -> None:
+    # Ten independent toggles: 1,024 states, 5,120 edges. Sleep sets fire each state's
+    # transitions above its highest set bit only: one edge per state but the first.
+    places = tuple(Place(f"p{i}", 1) for i in range(10))
+    transitions = tuple(Transition(f"t{i}", ((f"p{i}", 1),), ()) for i in range(10))
+    net = Net("independent", places, transitions)
+    full, every = _count_fired(net, "wide, no sleep sets")
+    reduced, fired = _count_fired(net, "wide")
+    assert (full.states, full.edges, every) == (1024, 5120, 5120)
+    assert (reduced.states, reduced.edges, fired) == (1024, 5120, 1023)
+    assert full.deadlocks.tolist() == reduced.deadlocks.tolist() == [1023]
+    assert len(reduced.trace_to(1023)) == 10
+
+
+def test_key_store_resolves_hash_collisions_exactly(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A hash with 16 values: two-word keys collide all the time, in tags and in slots.
+    weak = lambda keys: (keys[:, 0] & np.uint64(15)) * np.uint64(0x9E3779B97F4A7C15)  # noqa: E731
+    monkeypatch.setattr(encoding, "_hash", weak)
+    rng = np.random.default_rng(7)
+    store, seen = KeyStore(2), dict[tuple[int, ...], int]()
+    for size in (5, 300, 2000, 40, 2000):
+        batch = rng.integers(0, 60, size=(size, 2)).astype(np.uint64)
+        added = store.add(batch, want_ids=True)
+        assert added.ids is not None
+        expected = []
+        for row in map(tuple, batch.tolist()):
+            seen.setdefault(row, len(seen))
+            expected.append(seen[row])
+        assert added.ids.tolist() == expected
+    assert [tuple(k) for k in store.keys.tolist()] == list(seen)
+    assert store.find(np.array([[61, 0], *seen][:3], dtype=np.uint64)).tolist()[0] == -1
+
+
+def test_one_hot_components_are_proven_invariants() -> None:
+    # p + q holds one token; r + s holds two (not one-hot); u is produced from nothing.
+    net = Net(
+        "mixed",
+        (Place("p", 1), Place("q"), Place("r", 2), Place("s"), Place("u")),
+        (
+            Transition("pq", (("p", 1),), (("q", 1),)),
+            Transition("qp", (("q", 1), ("r", 1)), (("p", 1), ("s", 1))),
+            Transition("sr", (("s", 1),), (("r", 1), ("u", 1))),
+        ),
+    )
+    cn = CompactNet.from_net(net)
+    found = encoding.one_hot_components(cn)
+    assert [(c.places.tolist(), c.exact) for c in found] == [([0, 1], True)]
+    ref = explore_reference(net, max_states=BUDGET)
+    assert not ref.complete  # u grows forever
+    space = explore(net, max_states=BUDGET)
+    assert space.states == BUDGET and not space.complete
+
+
+@pytest.mark.parametrize(("words", "weak"), [(1, False), (2, False), (9, False), (3, True)])
+def test_key_store_matches_a_dict(words: int, weak: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Batches with repeats, budgets and growth (table rebuilds, wrap-around) against a
+    plain dict; ``weak`` makes the hash take 16 values (tags and slots collide)."""
+    if weak:
+        weak_hash = lambda keys: (keys[:, 0] & np.uint64(15)) * np.uint64(0x9E3779B97F4A7C15)  # noqa: E731
+        monkeypatch.setattr(encoding, "_hash", weak_hash)
+    rng = np.random.default_rng(words)
+    store, seen = KeyStore(words), dict[tuple[int, ...], int]()
+    for r in range(12):
+        size = int(rng.integers(1, 40 if r % 3 == 0 else (1500 if weak else 20_000)))
+        batch = rng.integers(0, 300 if weak else 5000, size=(size, words)).astype(np.uint64)
+        limit = int(rng.integers(0, 100)) if r % 4 == 1 else None
+        added = store.add(batch, limit=limit, want_ids=True)
+        expected_ids, expected_first, fresh = [], [], 0
+        for i, row in enumerate(map(tuple, batch.tolist())):
+            if row not in seen and (limit is None or fresh < limit):
+                seen[row] = len(seen)
+                fresh += 1
+                expected_first.append(i)
+            expected_ids.append(seen.get(row, -1))
+        assert added.ids is not None and added.ids.tolist() == expected_ids
+        assert added.first.tolist() == expected_first
+        assert store.find(batch).tolist() == expected_ids
+    assert [tuple(k) for k in store.keys.tolist()] == list(seen)
+
+
+def _forked(chains: int, length: int) -> Net:
+    """A fork into ``chains`` chains of ``length`` steps, each step able to give up into
+    one shared ``abort`` place (as missions compile replies that can time out)."""
+    places = [Place("start", 1), Place("abort")]
+    transitions = [
+        Transition("fork", (("start", 1),), tuple((f"c{c}_0", 1) for c in range(chains)))
+    ]
+    for c in range(chains):
+        places += [Place(f"c{c}_{i}") for i in range(length + 1)]
+        for i in range(length):
+            here, there = f"c{c}_{i}", f"c{c}_{i + 1}"
+            transitions.append(Transition(f"go{c}_{i}", ((here, 1),), ((there, 1),)))
+            transitions.append(Transition(f"quit{c}_{i}", ((here, 1),), (("abort", 1),)))
+    return Net("forked", tuple(places), tuple(transitions))
+
+
+def test_parts_of_a_flow_hold_at_most_one_token_and_are_packed_so() -> None:
+    # start + chain c never gains a token (the fork moves one in, quitting moves it to
+    # the shared abort): each chain is a component that may be empty (value 0).
+    net = _forked(3, 5)
+    cn = CompactNet.from_net(net)
+    parts = encoding.one_hot_components(cn)
+    assert len(parts) == 3 and not any(p.exact for p in parts)
+    space = explore(net)
+    assert sorted(space.layout.first) == [0, 1, 1, 1]  # abort is a count
+    _agree(space, explore_reference(net, max_states=5_000), net)
+    assert space.max_tokens_place == 3 and space.max_tokens_marking == 3
+
+
+@pytest.mark.parametrize("fields", [5, 300])
+def test_repacking_with_wider_fields_keeps_every_count(fields: int) -> None:
+    rng = np.random.default_rng(fields)
+    bits = rng.integers(1, 9, fields).tolist()
+    narrow = Layout.for_bits(bits)
+    wide = Layout.for_bits([b + int(rng.integers(0, 3)) for b in bits])
+    rows = np.array([[rng.integers(0, 1 << b) for b in bits] for _ in range(500)], np.uint64)
+    repacked = narrow.repack(narrow.pack(rows), wide)
+    assert (repacked == wide.pack(rows)).all()
+    assert (wide.unpack(repacked, np.uint64) == rows).all()
