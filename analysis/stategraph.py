@@ -1,0 +1,413 @@
+"""The reachability graph of a completely explored net, and what temporal checks need.
+
+`analysis.statespace.explore` stores every reachable marking but not the edges between
+them: counting and reachability questions never need them. Temporal properties do
+(cycles, "a final marking stays reachable", fair runs, CTL fixpoints, LTL products), so
+`build_graph` recovers them once, vectorised: for a block of stored markings it finds
+the enabled transitions, adds each one's key delta to the marking's packed key and
+looks the successor up in a hash set of all keys. The result is compressed sparse
+rows (``indptr``, ``targets``, ``labels``), 12 bytes per edge, in which every
+(marking, enabled transition) pair is one edge, as the MCC counts them.
+
+The algorithms below work on plain arrays so the LTL product graph can use them too:
+
+* `scc_labels`: strongly connected components (scipy's C implementation);
+* `backward_reach` / `forward_reach`: which nodes reach (are reached from) a set,
+  through allowed nodes and edges;
+* `shortest_path`: a shortest edge sequence from a set of nodes to another set;
+* `fair_sccs` and `fair_lasso`: cycles that a run satisfying weak fairness can take
+  forever (each *group* of edges that is enabled at every node of the cycle must occur
+  on it), with a lasso as evidence.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import numpy.typing as npt
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from analysis.encoding import KeyStore
+from analysis.statespace import StateSpace
+
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+Clock = Callable[[], float]
+
+GRAPH_CELLS = 1 << 22
+"""Most (marking, preset entry) cells gathered at once while finding enabled edges."""
+
+
+class GraphError(Exception):
+    """The graph cannot be built: the state space is incomplete or reduced, or the edge
+    budget ran out. The message says which; callers turn it into an inconclusive
+    verdict."""
+
+
+@dataclass(frozen=True)
+class StateGraph:
+    """Every reachable marking of a net and every (marking, enabled transition) edge.
+
+    Attributes:
+        space: the complete, unreduced state space the nodes come from; node ``i`` is
+            its state ``i`` (BFS order: ``space.trace_to(i)`` is a shortest trace).
+        indptr: edges of node ``i`` are ``indptr[i]:indptr[i + 1]``.
+        targets: successor node of each edge.
+        labels: transition index of each edge.
+        seconds: time spent building the edges.
+    """
+
+    space: StateSpace
+    indptr: IntArray
+    targets: IntArray
+    labels: IntArray
+    seconds: float
+
+    @property
+    def n_states(self) -> int:
+        """Number of nodes."""
+        return int(self.indptr.size - 1)
+
+    @property
+    def n_edges(self) -> int:
+        """Number of edges."""
+        return int(self.targets.size)
+
+    @cached_property
+    def sources(self) -> IntArray:
+        """Source node of each edge."""
+        return np.repeat(np.arange(self.n_states, dtype=np.int64), np.diff(self.indptr))
+
+    @cached_property
+    def dead(self) -> BoolArray:
+        """Nodes with no enabled transition."""
+        flags: BoolArray = np.diff(self.indptr) == 0
+        return flags
+
+    def enabled(self, transitions: Sequence[int]) -> BoolArray:
+        """Nodes where at least one of ``transitions`` is enabled."""
+        out = np.zeros(self.n_states, dtype=np.bool_)
+        if len(transitions):
+            hit = np.isin(self.labels, np.asarray(transitions, dtype=np.int64))
+            out[self.sources[hit]] = True
+        return out
+
+    def markings_where(self, predicate: Callable[[IntArray], BoolArray]) -> BoolArray:
+        """Per node, ``predicate`` applied to blocks of markings (as in
+        `StateSpace.find`)."""
+        out = np.zeros(self.n_states, dtype=np.bool_)
+        for start, block in self.space.iter_markings():
+            out[start : start + block.shape[0]] = predicate(block)
+        return out
+
+    def edge_steps(self, edges: Sequence[int]) -> list[tuple[int, int, int]]:
+        """``(source, transition, target)`` of each edge index."""
+        return [(int(self.sources[e]), int(self.labels[e]), int(self.targets[e])) for e in edges]
+
+
+def build_graph(
+    space: StateSpace,
+    *,
+    max_edges: int | None = None,
+    time_limit: float | None = None,
+    clock: Clock = time.perf_counter,
+) -> StateGraph:
+    """The edges of a complete, unreduced ``space``.
+
+    Args:
+        space: from `explore` with ``por=False``, ``complete``.
+        max_edges: stop with `GraphError` past this many edges (12 bytes each).
+        time_limit: stop with `GraphError` after this many seconds.
+        clock: seconds counter; tests pass a fake one.
+
+    Raises:
+        GraphError: the space is incomplete or reduced, or a budget ran out.
+    """
+    if space.reduced:
+        raise GraphError("the state space is stubborn-set reduced; temporal checks need all edges")
+    if not space.complete:
+        raise GraphError(f"the state space is incomplete ({space.stopped_reason})")
+    if max_edges is not None and space.edges > max_edges:
+        raise GraphError(f"{space.edges} edges exceed the budget of {max_edges}")
+    start = clock()
+    from analysis.encoding import CompactNet
+
+    cn = CompactNet.from_net(space.net)
+    n, n_t = space.states, cn.n_transitions
+    keys = np.ascontiguousarray(space.keys[:n])
+    store = KeyStore.of(keys, wide_index=n >= 1 << 31)
+    delta = space.layout.key_deltas(cn.effects)
+    per_marking = max(1, sum(int(g.places.size) for g in cn.groups) + n_t)
+    chunk = max(1, GRAPH_CELLS // per_marking)
+    counts = np.zeros(n, dtype=np.int64)
+    targets: list[IntArray] = []
+    labels: list[IntArray] = []
+    for first, block in space.iter_markings(chunk):
+        if time_limit is not None and clock() - start > time_limit:
+            raise GraphError(f"building the edges took more than {time_limit:g} s")
+        enabled = np.zeros((block.shape[0], n_t), dtype=np.bool_)
+        for group in cn.groups:
+            if group.places.shape[1] == 0:
+                enabled[:, group.transitions] = True
+                continue
+            ok = (block[:, group.places] >= group.weights).all(axis=2)
+            enabled[:, group.transitions] = ok
+        rows, trans = np.nonzero(enabled)
+        nodes = rows.astype(np.int64) + first
+        succ_keys = keys[nodes] + delta[trans]
+        found = store.find(succ_keys)
+        if found.size and int(found.min()) < 0:
+            raise GraphError("a successor marking is not in the state space (internal error)")
+        np.add.at(counts, nodes, 1)
+        targets.append(found)
+        labels.append(trans.astype(np.int64))
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    all_targets = np.concatenate(targets) if targets else np.zeros(0, dtype=np.int64)
+    all_labels = np.concatenate(labels) if labels else np.zeros(0, dtype=np.int64)
+    if max_edges is not None and all_targets.size > max_edges:
+        raise GraphError(f"{all_targets.size} edges exceed the budget of {max_edges}")
+    return StateGraph(space, indptr, all_targets, all_labels, clock() - start)
+
+
+# -- algorithms on arrays of edges --------------------------------------------------------
+
+
+def _matrix(n: int, src: IntArray, dst: IntArray) -> sp.csr_matrix:
+    data = np.ones(src.size, dtype=np.int8)
+    return sp.csr_matrix((data, (src, dst)), shape=(n, n))
+
+
+def scc_labels(n: int, src: IntArray, dst: IntArray) -> IntArray:
+    """Strongly connected component of each of ``n`` nodes under edges ``src -> dst``."""
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    _, labels = csgraph.connected_components(
+        _matrix(n, src, dst), directed=True, connection="strong"
+    )
+    return np.asarray(labels, dtype=np.int64)
+
+
+def nontrivial(n: int, src: IntArray, dst: IntArray, comp: IntArray) -> BoolArray:
+    """Per component of ``comp``, whether it holds a cycle (two nodes, or a self-loop)."""
+    n_comp = int(comp.max(initial=-1)) + 1
+    sizes = np.bincount(comp, minlength=n_comp)
+    cyclic = sizes > 1
+    loops = src[src == dst]
+    cyclic[comp[loops]] = True
+    return cyclic
+
+
+def forward_reach(n: int, src: IntArray, dst: IntArray, start: BoolArray) -> BoolArray:
+    """Nodes reachable from ``start`` (included) along edges ``src -> dst``."""
+    if not start.any():
+        return start.copy()
+    # One extra node feeding every start node turns a multi-source search into one BFS.
+    root = n
+    seeds = np.flatnonzero(start)
+    s = np.concatenate([src, np.full(seeds.size, root, dtype=np.int64)])
+    d = np.concatenate([dst, seeds])
+    order = csgraph.breadth_first_order(
+        _matrix(n + 1, s, d), root, directed=True, return_predecessors=False
+    )
+    out = np.zeros(n, dtype=np.bool_)
+    out[order[order < n]] = True
+    return out
+
+
+def backward_reach(n: int, src: IntArray, dst: IntArray, goal: BoolArray) -> BoolArray:
+    """Nodes from which ``goal`` is reachable (goal included) along edges
+    ``src -> dst``."""
+    return forward_reach(n, dst, src, goal)
+
+
+def shortest_path(
+    n: int, src: IntArray, dst: IntArray, start: BoolArray, goal: BoolArray
+) -> list[int] | None:
+    """Indices (into ``src``/``dst``) of a shortest edge sequence from some ``start``
+    node to some ``goal`` node; ``[]`` if a start node is a goal, ``None`` if none is
+    reachable."""
+    if (start & goal).any():
+        return []
+    if not start.any() or not goal.any():
+        return None
+    root = n
+    seeds = np.flatnonzero(start)
+    s = np.concatenate([src, np.full(seeds.size, root, dtype=np.int64)])
+    d = np.concatenate([dst, seeds])
+    order, pred = csgraph.breadth_first_order(
+        _matrix(n + 1, s, d), root, directed=True, return_predecessors=True
+    )
+    reached = order[(order < n)]
+    hits = reached[goal[reached]]
+    if not hits.size:
+        return None
+    # BFS order is by distance, so the first goal met is a nearest one.
+    node = int(hits[0])
+    # Recover the edges: for each step (pred -> node) take the first matching edge.
+    lookup = _edge_lookup(src, dst)
+    path: list[int] = []
+    while True:
+        parent = int(pred[node])
+        if parent == root or parent < 0:
+            break
+        path.append(lookup[(parent, node)])
+        node = parent
+    return path[::-1]
+
+
+def _edge_lookup(src: IntArray, dst: IntArray) -> dict[tuple[int, int], int]:
+    """The first edge index of each (source, target) pair."""
+    out: dict[tuple[int, int], int] = {}
+    for i, (a, b) in enumerate(zip(src.tolist(), dst.tolist(), strict=True)):
+        out.setdefault((a, b), i)
+    return out
+
+
+def fair_sccs(
+    n: int,
+    src: IntArray,
+    dst: IntArray,
+    groups: Sequence[tuple[BoolArray, BoolArray]],
+    within: BoolArray | None = None,
+) -> tuple[IntArray, BoolArray]:
+    """Components whose cycles a weakly fair run can take forever.
+
+    A run is weakly fair for a group when the group is not enabled at every position
+    from some point on without one of its edges being taken. A run that stays in a
+    strongly connected component ``C`` forever and takes every edge of ``C`` infinitely
+    often is the fairest one possible there: it violates a group exactly when the group
+    is enabled at every node of ``C`` and none of the group's edges lies inside ``C``.
+    So ``C`` (with a cycle) admits a fair run iff no group is in that position.
+
+    Args:
+        n: number of nodes.
+        src, dst: the edges.
+        groups: per fairness group, ``(enabled_at, edge_in_group)``: the nodes where
+            the group is enabled and which edges belong to it.
+        within: only nodes where this is true (and edges between them) count; ``None``
+            for all.
+
+    Returns:
+        ``(comp, fair)``: the component of each node (``-1`` outside ``within``) and,
+        per component, whether it has a cycle and admits a fair run.
+    """
+    keep = np.ones(src.size, dtype=np.bool_)
+    if within is not None:
+        keep = within[src] & within[dst]
+    s, d = src[keep], dst[keep]
+    comp = scc_labels(n, s, d)
+    if within is not None:
+        comp = np.where(within, comp, -1)
+    n_comp = int(comp.max(initial=-1)) + 1
+    # Nodes outside `within` get the spare index n_comp, dropped from the result.
+    fair = nontrivial(n, s, d, np.where(comp < 0, n_comp, comp))[:n_comp]
+    members = comp >= 0
+    for enabled_at, in_group in groups:
+        # Components in which the group is enabled at every node ...
+        disabled_somewhere = np.zeros(n_comp, dtype=np.bool_)
+        disabled_somewhere[comp[members & ~enabled_at]] = True
+        # ... and none of its edges stays inside the component.
+        inner = keep & in_group
+        inner_edges = np.zeros(n_comp, dtype=np.bool_)
+        if inner.any():
+            a, b = comp[src[inner]], comp[dst[inner]]
+            same = (a == b) & (a >= 0)
+            inner_edges[a[same]] = True
+        fair &= disabled_somewhere | inner_edges
+    return comp, fair
+
+
+@dataclass(frozen=True)
+class Lasso:
+    """An infinite run as evidence: edges from a start node to a cycle, then the cycle
+    (edge indices into the arrays it was found in)."""
+
+    prefix: tuple[int, ...]
+    cycle: tuple[int, ...]
+
+
+def fair_lasso(
+    n: int,
+    src: IntArray,
+    dst: IntArray,
+    start: BoolArray,
+    comp: IntArray,
+    fair: BoolArray,
+    groups: Sequence[tuple[BoolArray, BoolArray]] = (),
+) -> Lasso | None:
+    """A shortest prefix from ``start`` into a fair component, then a cycle inside it
+    that satisfies every group (takes one of its edges, or passes a node where it is
+    disabled). ``None`` when no fair component is reachable."""
+    if not fair.any():
+        return None
+    target = (comp >= 0) & fair[np.maximum(comp, 0)]
+    prefix = shortest_path(n, src, dst, start, target)
+    if prefix is None:
+        return None
+    entry = int(dst[prefix[-1]]) if prefix else int(np.flatnonzero(start & target)[0])
+    c = int(comp[entry])
+    inside = (comp[src] == c) & (comp[dst] == c)
+    cycle = _covering_cycle(n, src, dst, inside, entry, comp == c, groups)
+    return Lasso(tuple(prefix), tuple(cycle))
+
+
+def _covering_cycle(
+    n: int,
+    src: IntArray,
+    dst: IntArray,
+    inside: BoolArray,
+    entry: int,
+    members: BoolArray,
+    groups: Sequence[tuple[BoolArray, BoolArray]],
+) -> list[int]:
+    """A cycle from ``entry`` back to it, within the component, that visits for each
+    group an edge of it (or a node where it is disabled): a chain of shortest paths."""
+    idx = np.flatnonzero(inside)
+    s, d = src[idx], dst[idx]
+    cycle: list[int] = []
+    here = entry
+    for enabled_at, in_group in groups:
+        if (members & ~enabled_at).any():
+            goal_nodes = members & ~enabled_at
+            if not goal_nodes[here]:
+                step = shortest_path(n, s, d, _one(n, here), goal_nodes)
+                assert step is not None
+                cycle += [int(idx[e]) for e in step]
+                here = int(d[step[-1]]) if step else here
+            continue
+        group_edges = np.flatnonzero(in_group[idx])
+        assert group_edges.size, "a fair component has an inner edge of every enabled group"
+        heads = np.zeros(n, dtype=np.bool_)
+        heads[s[group_edges]] = True
+        step = shortest_path(n, s, d, _one(n, here), heads)
+        assert step is not None
+        cycle += [int(idx[e]) for e in step]
+        here = int(d[step[-1]]) if step else here
+        take = group_edges[s[group_edges] == here][0]
+        cycle.append(int(idx[take]))
+        here = int(d[take])
+    # Close the cycle; a cycle must take at least one edge.
+    if here == entry and cycle:
+        return cycle
+    if here == entry:
+        loops = np.flatnonzero(s == entry)
+        first = loops[0]
+        cycle.append(int(idx[first]))
+        here = int(d[first])
+        if here == entry:
+            return cycle
+    back = shortest_path(n, s, d, _one(n, here), _one(n, entry))
+    assert back is not None
+    return cycle + [int(idx[e]) for e in back]
+
+
+def _one(n: int, node: int) -> BoolArray:
+    out = np.zeros(n, dtype=np.bool_)
+    out[node] = True
+    return out
