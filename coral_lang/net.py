@@ -171,6 +171,9 @@ class Net:
     assertions: tuple[Assertion, ...] = ()
     vehicle: str | None = None
     sources: tuple[str, ...] = ()
+    requirements: tuple[str, ...] = ()
+    """What the mission demands of verification beyond the defaults, from its
+    ``require`` lines (e.g. ``"termination"``): a certificate needs these proven."""
     _place_index: Mapping[str, int] = field(init=False, repr=False, compare=False)
     _transition_index: Mapping[str, int] = field(init=False, repr=False, compare=False)
 
@@ -337,6 +340,8 @@ class Net:
                 [a.kind.value, sorted([p, w] for p, w in a.places), a.bound]
                 for a in self.assertions
             ),
+            # Only when present, so nets without requirements keep their digests.
+            **({"requirements": sorted(self.requirements)} if self.requirements else {}),
         }
 
     def digest(self) -> str:
