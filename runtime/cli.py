@@ -10,8 +10,9 @@ there is none), runs it, writes the event logs to ``--out`` and draws the timeli
 ``coral-run timeline LOG...`` merges a controller log and a vehicle log and plots them.
 
 Exit codes: 0 the mission reached a declared final marking; 1 it ended otherwise
-(deadlock, the vehicle lost the mission, the time limit); 2 bad usage or input (a mission
-that does not compile, no passing certificate, an unreadable log or key).
+(deadlock, the vehicle lost the mission, the time limit, an engine spin: a cycle of engine
+transitions that never waits for the vehicle); 2 bad usage or input (a mission that does
+not compile, no passing certificate, an unreadable log or key), never a run-time condition.
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ EXIT_USAGE = 2
 
 EXIT_CODES_HELP = (
     "exit codes: 0 the mission reached a declared final marking, 1 it ended otherwise "
-    "(deadlock, vehicle lost the mission, time limit), 2 bad usage or input (mission does "
-    "not compile, no passing certificate, unreadable log or key)"
+    "(deadlock, vehicle lost the mission, time limit, engine spin), 2 bad usage or input "
+    "(mission does not compile, no passing certificate, unreadable log or key)"
 )
 
 
@@ -147,8 +148,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("give a MISSION to run, or --resume LOG")
     if options.realtime and options.vehicle is not None:
         parser.error("--realtime applies to the simulator; a --vehicle always runs in real time")
+    from runtime.engine import EngineSpin
+
     try:
         return _run(options)
+    except EngineSpin as exc:  # the controller ends a run on a spin; this is a safety net
+        print(f"coral-run: mission failed: {exc}", file=sys.stderr)
+        return EXIT_MISSION_FAILED
     except CoralError as exc:
         print(f"coral-run: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -221,6 +227,8 @@ def _run(options: argparse.Namespace) -> int:
         result = run_mission(approved, config)
     if options.quiet:
         print(result.summary())
+    if result.detail:
+        print(f"coral-run: {result.detail}", file=sys.stderr)
     if not options.no_plots:
         from runtime.timeline import merge_logs, plot_timeline
 

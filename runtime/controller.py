@@ -15,6 +15,11 @@
   (no valid frame for ``silence_limit`` seconds, too many rejected frames, a peer that
   disagrees about the handshake) as lost: close, wait, reconnect.
 * Telemetry datagrams are checked (`DatagramReceiver`) and logged.
+* A step of the engine that never stops firing (`runtime.engine.EngineSpin`: a cycle of
+  engine transitions that never waits for the vehicle) ends the run as ``spin``: the spin
+  is logged with its cycle, nothing more is sent, and the connection is closed, so the
+  vehicle's own watchdog (the ``silence_timeout`` of the handshake) stops its tasks and
+  surfaces it. The wire protocol has no message to stop a vehicle (docs/runtime.md).
 
 Time is the running event loop's clock, so the same code runs in real time on sockets
 and instantly under `runtime.vclock.VirtualTimeLoop`.
@@ -30,7 +35,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from runtime.engine import Engine, Outcome, SentCommand, StepResult
+from runtime.engine import Engine, EngineSpin, Firing, Outcome, SentCommand, StepResult
 from runtime.eventlog import EventLog, TelemetrySample
 from runtime.link import Connection, Link
 from runtime.protocol import (
@@ -61,6 +66,7 @@ class RunEnd(enum.Enum):
     DEADLOCK = "deadlock"  # nothing can happen and the marking is not final
     VEHICLE_LOST_MISSION = "vehicle-lost-mission"  # the vehicle no longer knows it
     TIME_LIMIT = "time-limit"  # the run's time limit passed first
+    SPIN = "spin"  # the engine fired without end, never waiting for the vehicle (a cycle)
 
 
 @dataclass(frozen=True)
@@ -110,6 +116,8 @@ class RunResult:
     telemetry: int = 0
     telemetry_rejected: int = 0
     clock_syncs: list[ClockSync] = field(default_factory=list)
+    detail: str = ""
+    """Why the mission ended so, when there is more to say (a spin: its cycle)."""
 
     @property
     def ok(self) -> bool:
@@ -125,6 +133,7 @@ class RunResult:
             f"{self.replies} replies consumed ({self.duplicate_replies} duplicates ignored, "
             f"{self.unexpected_replies} unexpected), {self.connections} connections, "
             f"{self.rejected_frames} frames rejected, {self.telemetry} telemetry samples"
+            + (f"\n  {self.detail}" if self.detail else "")
         )
 
 
@@ -189,6 +198,7 @@ class Controller:
         self._heartbeat_interval = self.options.heartbeat_interval
         self._result: RunResult | None = None
         self._written: set[int] = set()  # command ids written on some connection already
+        self._spin: EngineSpin | None = None  # the engine spun: the run is over
 
     # ------------------------------------------------------------------ construction
 
@@ -206,8 +216,15 @@ class Controller:
     ) -> Controller:
         """Start ``engine``'s mission at ``now`` and commit its first step to ``log``."""
         controller = cls(engine, link, psk, log, mission_id=mission_id, **kwargs)  # type: ignore[arg-type]
-        step = engine.start(now)
-        log.event(now, "mission-start", mission_id=mission_id, marking=engine.marking_dict())
+        marking = engine.marking_dict()
+        try:
+            step = engine.start(now)
+        except EngineSpin as spin:
+            # Nothing was sent: `run` ends at once, and the vehicle never hears of it.
+            log.event(now, "mission-start", mission_id=mission_id, marking=marking)
+            controller._on_spin(now, spin)
+            return controller
+        log.event(now, "mission-start", mission_id=mission_id, marking=marking)
         controller._log_step(now, step)
         controller._commit()
         return controller
@@ -266,6 +283,31 @@ class Controller:
         """Drive the mission to its end; returns what happened."""
         now = self._now()
         result = self._result = RunResult(RunEnd.FINAL, {}, now, now)
+        if self._spin is None:
+            await self._run(result, now)
+        if self._spin is not None:
+            result.end = RunEnd.SPIN
+            result.detail = str(self._spin)
+        result.ended_at = self._now()
+        result.marking = self.engine.marking_dict()
+        self.log.event(
+            result.ended_at,
+            "mission-end",
+            end=result.end.value,
+            final=result.end is RunEnd.FINAL,
+            marking=result.marking,
+        )
+        if self._spin is None:
+            self._commit()
+        else:
+            # The engine stopped in the middle of a step: its state is no checkpoint. The
+            # last one (before the step) stays, with the reply that began it unconsumed.
+            self.log.commit(None)
+        self._console(result.summary())
+        return result
+
+    async def _run(self, result: RunResult, now: float) -> None:
+        """Connect, and reconnect, until the mission ends; sets ``result.end``."""
         deadline = None if self.options.time_limit is None else now + self.options.time_limit
         port = await self.link.open_telemetry(self._on_datagram)
         attempt = 0
@@ -306,18 +348,8 @@ class Controller:
         except _MissionLost as exc:
             result.end = RunEnd.VEHICLE_LOST_MISSION
             self._note("mission-lost", str(exc))
-        result.ended_at = self._now()
-        result.marking = self.engine.marking_dict()
-        self.log.event(
-            result.ended_at,
-            "mission-end",
-            end=result.end.value,
-            final=result.end is RunEnd.FINAL,
-            marking=result.marking,
-        )
-        self._commit()
-        self._console(result.summary())
-        return result
+        except EngineSpin:
+            pass  # logged by `_on_reply`; `run` ends the mission as a spin
 
     async def _session(self, conn: Connection, port: int, deadline: float | None) -> None:
         """One connection: handshake, re-send, then replies until the mission ends."""
@@ -431,7 +463,23 @@ class Controller:
             self._result.duplicate_replies += 1
             self._write(conn, codec, ReplyAck(self.consumed))
             return
-        step = self.engine.on_reply(reply.command_id, reply.kind, now)
+        try:
+            step = self.engine.on_reply(reply.command_id, reply.kind, now)
+        except EngineSpin as spin:
+            # The reply is logged, not acknowledged: the checkpoint keeps it unconsumed.
+            self.log.event(
+                now,
+                "reply",
+                command_id=reply.command_id,
+                reply_seq=reply.reply_seq,
+                kind=reply.kind,
+                vehicle_time=reply.vehicle_time,
+                detail=reply.detail,
+                transition=spin.prefix[0].transition if spin.prefix else None,
+            )
+            self._result.replies += 1
+            self._on_spin(now, spin)
+            raise
         transition = step.firings[0].transition if step.firings else None
         self.log.event(
             now,
@@ -482,8 +530,7 @@ class Controller:
             )
 
     def _log_step(self, now: float, step: StepResult) -> None:
-        for firing in step.firings:
-            self.log.event(now, "fire", transition=firing.transition, command_id=firing.command_id)
+        self._log_firings(now, step.firings)
         for sent in step.commands:
             self.log.event(
                 now,
@@ -495,6 +542,22 @@ class Controller:
                 resources=list(sent.command.resources),
                 timeout_at=sent.timeout_at,
             )
+
+    def _log_firings(self, now: float, firings: tuple[Firing, ...]) -> None:
+        for firing in firings:
+            self.log.event(now, "fire", transition=firing.transition, command_id=firing.command_id)
+
+    def _on_spin(self, now: float, spin: EngineSpin) -> None:
+        """The engine spun: log how it got into the cycle, and the cycle; nothing is sent.
+
+        The commands the step emitted before the engine gave up are never sent; the
+        vehicle carries on with what it was told, until its watchdog surfaces it.
+        """
+        self._spin = spin
+        self._log_firings(now, spin.prefix)
+        self.log.event(now, "engine-spin", **spin.to_json())
+        self.log.commit(None)
+        self._console(f"t={now:.1f} {spin}")
 
     def _commit(self) -> None:
         self.log.commit(

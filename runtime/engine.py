@@ -23,9 +23,9 @@ from __future__ import annotations
 import enum
 import heapq
 import random
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from analysis.certificate import CertificateCheck
 from coral_lang.diagnostics import CoralError
@@ -36,19 +36,27 @@ __all__ = [
     "CommandStatus",
     "Engine",
     "EngineError",
+    "EngineSpin",
     "Firing",
     "Outcome",
     "Policy",
     "SentCommand",
     "StepResult",
     "UnexpectedReply",
+    "find_cycle",
 ]
 
 DEFAULT_MAX_FIRINGS_PER_STEP = 1_000_000
 
+SPIN_WINDOW = 4096
+"""How many of the last firings a spin's cycle is looked for in (`find_cycle`)."""
+SPIN_PREFIX = 100
+"""At most this many firings of the spinning step before its cycle are kept (`EngineSpin`)."""
+_SPIN_SHOWN = 12  # transitions of a cycle named in the message; a longer one is cut
+
 
 class EngineError(CoralError, RuntimeError):
-    """The engine cannot go on: no passing certificate, a bad snapshot, a livelock."""
+    """The engine cannot go on: no passing certificate, a bad snapshot, a spin."""
 
 
 class Policy(enum.Enum):
@@ -91,6 +99,122 @@ class Firing(NamedTuple):
     transition: str
     time: float
     command_id: int | None = None  # the command sent, or the one answered (reply)
+
+
+class EngineSpin(EngineError):
+    """A step fired more than ``max_firings_per_step`` engine transitions without waiting
+    for the vehicle: a cycle of engine transitions (a livelock) that the mission cannot
+    leave. The mission has failed; the controller ends the run as ``spin``.
+
+    The engine is left in the middle of that step: do not use it further (its last
+    snapshot before the step is the state to restore, if any).
+
+    Attributes:
+        cycle: the transitions of the repeating cycle, in firing order, starting with the
+            first one fired when the step entered it (the first is not repeated at the end).
+        sources: ``file:line`` of each transition of ``cycle`` ("" where unknown).
+        prefix: the step's firings before it entered the cycle (the reply transition that
+            began the step first, if any); the first `SPIN_PREFIX` of them.
+        marking: the marking when the engine gave up.
+        limit: the firing limit that was passed.
+        irregular: the tail of the step is not periodic (random choices, or a cycle longer
+            than `SPIN_WINDOW`): ``cycle`` is then only the stretch between the last two
+            firings of the last transition fired.
+    """
+
+    def __init__(
+        self,
+        *,
+        cycle: tuple[str, ...],
+        sources: tuple[str, ...],
+        prefix: tuple[Firing, ...],
+        marking: dict[str, int],
+        limit: int,
+        irregular: bool = False,
+    ) -> None:
+        self.cycle = cycle
+        self.sources = sources
+        self.prefix = prefix
+        self.marking = marking
+        self.limit = limit
+        self.irregular = irregular
+        super().__init__(
+            f"engine spin: more than {limit} firings without waiting for the vehicle; "
+            f"{'irregular ' if irregular else ''}cycle {self.describe()}"
+        )
+
+    def describe(self) -> str:
+        """The cycle as ``ping (m.coral:14) -> pong (m.coral:18) -> ping``."""
+        if not self.cycle:
+            return "(none found)"
+        steps = [
+            f"{name} ({where})" if where else name
+            for name, where in zip(self.cycle, self.sources, strict=True)
+        ]
+        if len(steps) > _SPIN_SHOWN:
+            cut = len(steps) - (_SPIN_SHOWN - 1)
+            steps = [*steps[: _SPIN_SHOWN - 1], f"... ({cut} more)"]
+        return " -> ".join([*steps, self.cycle[0]])
+
+    def to_json(self) -> dict[str, object]:
+        """The spin as JSON-ready data (the controller's ``engine-spin`` event)."""
+        return {
+            "cycle": list(self.cycle),
+            "sources": list(self.sources),
+            "marking": dict(self.marking),
+            "limit": self.limit,
+            "irregular": self.irregular,
+            "message": str(self),
+        }
+
+
+def find_cycle(fired: Sequence[str], window: int = SPIN_WINDOW) -> tuple[int, int, bool]:
+    """Where the repeating cycle at the end of ``fired`` starts, and its length.
+
+    Looks at the last ``window`` names for the longest stretch at the end that repeats one
+    period at least twice. If it covers at least half of them, the cycle is that shortest
+    period, starting where the periodic stretch begins (followed back through all of
+    ``fired``: after the firings that led into the cycle). Otherwise (``irregular``: random
+    choices, or a cycle too long for the window) the cycle is the stretch from the
+    previous firing of the last name to the end. Costs O(window), plus O(len(fired)) to
+    find where a cycle longer than the window began: once, when the engine gives up.
+
+    Returns:
+        ``(start, length, irregular)``; ``fired[start:start + length]`` is the cycle;
+        length 0 when no name repeats in the window.
+    """
+    n = len(fired)
+    w = min(n, window)
+    if w < 2:
+        return n, 0, True
+    back = list(reversed(fired[n - w :]))  # back[0] is the last firing
+    # The prefix function (Knuth-Morris-Pratt): border[i] is the length of the longest
+    # proper prefix of back[:i + 1] that is also its suffix, so back[:i + 1] has the
+    # period i + 1 - border[i].
+    border = [0] * w
+    k = 0
+    for i in range(1, w):
+        while k and back[i] != back[k]:
+            k = border[k - 1]
+        if back[i] == back[k]:
+            k += 1
+        border[i] = k
+    for length in range(w, 1, -1):
+        period = length - border[length - 1]
+        if 2 * period <= length:
+            break
+    else:
+        length, period = 0, 0
+    if period and 2 * length >= w:
+        start = n - length
+        while start > 0 and fired[start - 1] == fired[start - 1 + period]:
+            start -= 1
+        return start, period, False
+    last = fired[-1]
+    for i in range(n - 2, n - w - 1, -1):
+        if fired[i] == last:
+            return i, n - 1 - i, True
+    return n, 0, True
 
 
 @dataclass(frozen=True)
@@ -214,7 +338,8 @@ class Engine:
         policy: how to choose among enabled transitions.
         seed: the seed of the generator `Policy.RANDOM` uses.
         max_firings_per_step: a bound on the firings of one step, so a cycle of engine
-            transitions that never waits for the vehicle is reported, not run forever.
+            transitions that never waits for the vehicle is reported (`EngineSpin`, from
+            `start` or `on_reply`), not run forever.
 
     Raises:
         EngineError: the approval is for another net (its digest differs).
@@ -365,6 +490,7 @@ class Engine:
 
         Raises:
             EngineError: called twice.
+            EngineSpin: more than ``max_firings_per_step`` firings: a cycle.
         """
         if self.started:
             raise EngineError("the mission was already started")
@@ -376,6 +502,9 @@ class Engine:
         then every engine transition it enables, to quiescence.
 
         A reply the net cannot take changes nothing and comes back as ``unexpected``.
+
+        Raises:
+            EngineSpin: more than ``max_firings_per_step`` firings: a cycle.
         """
         flight = self._in_flight.get(command_id)
         if flight is None:
@@ -406,10 +535,7 @@ class Engine:
         while (chosen := choose()) is not None:
             count += 1
             if count > limit:
-                raise EngineError(
-                    f"more than {limit} firings without waiting for the vehicle: "
-                    f"a cycle of engine transitions (last fired: {names[chosen]})"
-                )
+                raise self._spin(firings, limit, chosen)
             fire(chosen)
             command = command_of[chosen]
             if command is None:
@@ -419,6 +545,26 @@ class Engine:
                 commands.append(sent)
                 firings.append(Firing(names[chosen], now, sent.command_id))
         return StepResult(tuple(firings), tuple(commands), self.outcome())
+
+    def _spin(self, firings: Sequence[Firing], limit: int, chosen: int) -> EngineSpin:
+        """The error for a step that passed its firing limit, naming the cycle it is in."""
+        self._queued[chosen] = True  # taken off the heap, not fired: still enabled
+        heapq.heappush(self._heap, (-self._c.priority[chosen], chosen))
+        fired = _Names(firings)
+        start, length, irregular = find_cycle(fired)
+        cycle = tuple(fired[start : start + length])
+        sources = []
+        for name in cycle:
+            span = self.net.transitions[self.net.transition_index(name)].span
+            sources.append("" if span is None else f"{span.file}:{span.line}")
+        return EngineSpin(
+            cycle=cycle,
+            sources=tuple(sources),
+            prefix=tuple(firings[: min(start, SPIN_PREFIX)]),
+            marking=self.marking_dict(),
+            limit=limit,
+            irregular=irregular,
+        )
 
     def _send(self, index: int, command: Command, now: float) -> SentCommand:
         command_id = self._next_command_id
@@ -523,3 +669,18 @@ class Engine:
 
 def _by_id(flight: _InFlight) -> int:
     return flight.command_id
+
+
+class _Names(Sequence[str]):
+    """The transition names of a list of firings, without copying it (it may be long)."""
+
+    def __init__(self, firings: Sequence[Firing]) -> None:
+        self._firings = firings
+
+    def __len__(self) -> int:
+        return len(self._firings)
+
+    def __getitem__(self, index: int | slice) -> Any:
+        if isinstance(index, slice):
+            return [f.transition for f in self._firings[index]]
+        return self._firings[index].transition

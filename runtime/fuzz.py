@@ -17,6 +17,10 @@ Only the simulator is ever used: there is no option to reach a vehicle, and a mi
 without a passing certificate is accepted only with ``--unverified``, under an approval
 that exists in this process alone (`UNVERIFIED`).
 
+A run that ends otherwise (a deadlock, the time limit, an engine spin: a cycle of engine
+transitions that never waits for the vehicle) is a failure, reported with its run seed;
+the campaign goes on.
+
 Exit codes: 0 every run reached a declared final marking, 1 some run did not, 2 bad input.
 """
 
@@ -124,6 +128,7 @@ class FuzzRun:
         events_digest: SHA-256 of the controller's event sequence (times included):
             two runs with the same digest did the same thing at the same times.
         wall_seconds: real time the run took.
+        detail: why the run ended so, when there is more to say (a spin: its cycle).
         events: the controller's events, when asked for (`run_one` ``keep_events``).
         log: where the controller's log was kept (failures and replays), if anywhere.
     """
@@ -142,6 +147,7 @@ class FuzzRun:
     vehicle_commands: int
     events_digest: str
     wall_seconds: float
+    detail: str = ""
     events: tuple[Event, ...] = field(default=(), repr=False, compare=False)
     log: Path | None = None
 
@@ -172,6 +178,7 @@ class FuzzRun:
             "vehicle_commands": self.vehicle_commands,
             "events_digest": self.events_digest,
             "wall_seconds": self.wall_seconds,
+            "detail": self.detail,
             "log": None if self.log is None else str(self.log),
         }
 
@@ -251,6 +258,7 @@ def run_one(
         vehicle_commands=vehicle_commands,
         events_digest=events_digest(events),
         wall_seconds=time.perf_counter() - started,
+        detail=result.detail,
         events=events if keep_events else (),
         log=kept,
     )
@@ -483,6 +491,8 @@ def format_report(report: FuzzReport, command: str) -> str:
             elif predicted is False:
                 note = " (NOT among analysis's dead markings: please report this)"
             lines.append(f"    seed {run.seed}: {run.ending()} after {run.duration:.1f} s{note}")
+            if run.detail:
+                lines.append(f"      {run.detail}")
             lines.append(f"      {command} --replay {run.seed}")
         if len(failures) > 20:
             lines.append(f"    ... and {len(failures) - 20} more in {REPORT_JSON}")
@@ -544,6 +554,8 @@ def format_replay(run: FuzzRun) -> str:
         f"ended: {run.ending()} after {run.duration:.1f} s (virtual); {_run_detail(run)}; "
         f"events {run.events_digest}"
     )
+    if run.detail:
+        lines.append(f"  {run.detail}")
     return "\n".join(lines)
 
 
