@@ -18,19 +18,23 @@ The algorithms below work on plain arrays so the LTL product graph can use them 
 * `fair_sccs` and `fair_lasso`: cycles that a run satisfying weak fairness can take
   forever (each *group* of edges that is enabled at every node of the cycle must occur
   on it), with a lasso as evidence.
+
+Graphs of at most `SMALL_GRAPH` edges (every mission of a few hundred markings) are
+searched in plain Python: loading scipy costs about 0.2 s, longer than searching them,
+and every ``coral-check`` of a mission pays it otherwise. scipy is loaded on first use.
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
-import scipy.sparse as sp
-from scipy.sparse import csgraph
 
 from analysis.encoding import KeyStore
 from analysis.statespace import StateSpace
@@ -39,8 +43,13 @@ IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 Clock = Callable[[], float]
 
+if TYPE_CHECKING:
+    import scipy.sparse as sp
+
 GRAPH_CELLS = 1 << 22
 """Most (marking, preset entry) cells gathered at once while finding enabled edges."""
+SMALL_GRAPH = 10_000
+"""Graphs with at most this many nodes and edges are searched in Python, not scipy."""
 
 
 class GraphError(Exception):
@@ -179,14 +188,100 @@ def build_graph(
 
 
 def _matrix(n: int, src: IntArray, dst: IntArray) -> sp.csr_matrix:
+    import scipy.sparse as sp
+
     data = np.ones(src.size, dtype=np.int8)
     return sp.csr_matrix((data, (src, dst)), shape=(n, n))
+
+
+def _small(n: int, src: IntArray) -> bool:
+    return n <= SMALL_GRAPH and src.size <= SMALL_GRAPH
+
+
+def _successors(n: int, src: IntArray, dst: IntArray) -> list[list[tuple[int, int]]]:
+    """Per node, its ``(target, edge index)`` pairs in edge order."""
+    out: list[list[tuple[int, int]]] = [[] for _ in range(n)]
+    for e, (a, b) in enumerate(zip(src.tolist(), dst.tolist(), strict=True)):
+        out[a].append((b, e))
+    return out
+
+
+def _scc_small(n: int, src: IntArray, dst: IntArray) -> IntArray:
+    """`scc_labels` in Python: Tarjan's algorithm with an explicit stack."""
+    succ = [[b for b, _ in edges] for edges in _successors(n, src, dst)]
+    index, low, comp = [-1] * n, [0] * n, [-1] * n
+    on_stack = [False] * n
+    stack: list[int] = []
+    counter = components = 0
+    for root in range(n):
+        if index[root] >= 0:
+            continue
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack[root] = True
+        work = [(root, 0)]
+        while work:
+            v, i = work[-1]
+            if i < len(succ[v]):
+                work[-1] = (v, i + 1)
+                w = succ[v][i]
+                if index[w] < 0:
+                    index[w] = low[w] = counter
+                    counter += 1
+                    stack.append(w)
+                    on_stack[w] = True
+                    work.append((w, 0))
+                elif on_stack[w]:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                parent = work[-1][0]
+                low[parent] = min(low[parent], low[v])
+            if low[v] == index[v]:
+                while True:
+                    w = stack.pop()
+                    on_stack[w] = False
+                    comp[w] = components
+                    if w == v:
+                        break
+                components += 1
+    return np.asarray(comp, dtype=np.int64)
+
+
+def _bfs_small(
+    n: int, src: IntArray, dst: IntArray, start: BoolArray, goal: BoolArray | None
+) -> tuple[list[int], list[int], int]:
+    """Breadth-first search from every ``start`` node: ``(visited in order, edge that
+    reached each node or -1, first goal node met or -1)``."""
+    succ = _successors(n, src, dst)
+    via = [-1] * n
+    seen = start.tolist()
+    order = [int(v) for v in np.flatnonzero(start)]
+    queue = deque(order)
+    wanted = goal.tolist() if goal is not None else None
+    while queue:
+        v = queue.popleft()
+        if wanted is not None and wanted[v]:
+            return order, via, v
+        for w, e in succ[v]:
+            if not seen[w]:
+                seen[w] = True
+                via[w] = e
+                order.append(w)
+                queue.append(w)
+    return order, via, -1
 
 
 def scc_labels(n: int, src: IntArray, dst: IntArray) -> IntArray:
     """Strongly connected component of each of ``n`` nodes under edges ``src -> dst``."""
     if n == 0:
         return np.zeros(0, dtype=np.int64)
+    if _small(n, src):
+        return _scc_small(n, src, dst)
+    from scipy.sparse import csgraph
+
     _, labels = csgraph.connected_components(
         _matrix(n, src, dst), directed=True, connection="strong"
     )
@@ -207,6 +302,12 @@ def forward_reach(n: int, src: IntArray, dst: IntArray, start: BoolArray) -> Boo
     """Nodes reachable from ``start`` (included) along edges ``src -> dst``."""
     if not start.any():
         return start.copy()
+    if _small(n, src):
+        out = np.zeros(n, dtype=np.bool_)
+        out[_bfs_small(n, src, dst, start, None)[0]] = True
+        return out
+    from scipy.sparse import csgraph
+
     # One extra node feeding every start node turns a multi-source search into one BFS.
     root = n
     seeds = np.flatnonzero(start)
@@ -236,6 +337,17 @@ def shortest_path(
         return []
     if not start.any() or not goal.any():
         return None
+    if _small(n, src):
+        _, via, node = _bfs_small(n, src, dst, start, goal)
+        if node < 0:
+            return None
+        path: list[int] = []
+        while via[node] >= 0:
+            path.append(via[node])
+            node = int(src[via[node]])
+        return path[::-1]
+    from scipy.sparse import csgraph
+
     root = n
     seeds = np.flatnonzero(start)
     s = np.concatenate([src, np.full(seeds.size, root, dtype=np.int64)])
@@ -249,24 +361,31 @@ def shortest_path(
         return None
     # BFS order is by distance, so the first goal met is a nearest one.
     node = int(hits[0])
-    # Recover the edges: for each step (pred -> node) take the first matching edge.
-    lookup = _edge_lookup(src, dst)
-    path: list[int] = []
+    nodes = [node]
     while True:
         parent = int(pred[node])
         if parent == root or parent < 0:
             break
-        path.append(lookup[(parent, node)])
+        nodes.append(parent)
         node = parent
-    return path[::-1]
+    nodes.reverse()
+    # Recover the edges: for each step (pred -> node) take the first matching edge.
+    return _first_edges(n, src, dst, nodes[:-1], nodes[1:])
 
 
-def _edge_lookup(src: IntArray, dst: IntArray) -> dict[tuple[int, int], int]:
-    """The first edge index of each (source, target) pair."""
-    out: dict[tuple[int, int], int] = {}
-    for i, (a, b) in enumerate(zip(src.tolist(), dst.tolist(), strict=True)):
-        out.setdefault((a, b), i)
-    return out
+def _first_edges(
+    n: int, src: IntArray, dst: IntArray, heads: Sequence[int], tails: Sequence[int]
+) -> list[int]:
+    """For each ``(heads[i], tails[i])`` pair, the first edge index from one to the other
+    (each pair must have an edge): one sort of the edges, then a binary search per
+    pair, so long paths in large graphs stay cheap."""
+    if not len(heads):
+        return []
+    keys = src.astype(np.int64) * (n + 1) + dst
+    order = np.argsort(keys, kind="stable")
+    wanted = np.asarray(heads, dtype=np.int64) * (n + 1) + np.asarray(tails, dtype=np.int64)
+    found = order[np.searchsorted(keys[order], wanted)]
+    return [int(e) for e in found]
 
 
 def fair_sccs(
