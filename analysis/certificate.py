@@ -1,15 +1,20 @@
 """Pre-mission certificates: proof, in a file, that a net passed verification.
 
 The runtime refuses to run a net unless a certificate for the same net digest says
-every property was proven. The digest covers everything that changes the vehicle's
-behaviour and nothing that does not (``Net.digest``), so reformatting a mission keeps
-its certificate valid and changing any parameter, arc or final marking voids it.
+every required property was proven, among them the termination properties every
+mission needs (``no_engine_cycle``, ``final_always_reachable``, and ``terminates`` when
+the mission says ``require termination``: `analysis.termination.required_keys`); a
+certificate without them, such as one issued before they existed, is refused. The
+digest covers everything that changes the vehicle's behaviour and nothing that does not
+(``Net.digest``), so reformatting a mission keeps its certificate valid and changing any
+parameter, arc or final marking voids it.
 
 A certificate is JSON (format documented in ``docs/verify.md``)::
 
     {"format": 1, "tool": "coral", "tool_version": "0.1.0", "net": "pool_mission",
      "net_digest": "sha256:...", "verdict": "proven", "issued": "2026-11-21T07:00:00Z",
-     "properties": [{"key": "deadlock", "verdict": "proven", "method": "..."}, ...],
+     "properties": [{"key": "deadlock", "verdict": "proven", "method": "...",
+                     "required": true}, ...],
      "options": {"max_states": 2000000, ...}}
 """
 
@@ -22,6 +27,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from analysis.report import Report, Verdict
+from analysis.termination import certificate_gaps
 from analysis.verify import VerifyOptions
 from coral_lang.diagnostics import CoralError
 from coral_lang.net import Net
@@ -58,7 +64,9 @@ def make_certificate(
     """The certificate for ``report``: its digest, verdicts and the date of issue.
 
     A certificate is made for any report; only one whose verdict is ``proven`` lets the
-    runtime run the net (see `check_certificate`).
+    runtime run the net (see `check_certificate`). Every property is listed with its
+    verdict, its method and whether it was required: one that is not (``terminates``
+    without ``require termination``) may be violated in a passing certificate.
     """
     settings = asdict(options or VerifyOptions())
     settings.pop("progress", None)
@@ -72,7 +80,13 @@ def make_certificate(
         "verdict": report.verdict.value,
         "issued": clock().astimezone(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "properties": [
-            {"key": p.key, "title": p.title, "verdict": p.verdict.value, "method": p.method}
+            {
+                "key": p.key,
+                "title": p.title,
+                "verdict": p.verdict.value,
+                "method": p.method,
+                "required": p.required,
+            }
             for p in report.properties
         ],
         "options": settings,
@@ -99,8 +113,10 @@ def check_certificate(net: Net, path: str | Path) -> CertificateCheck:
 
     Raises:
         CertificateError: the file is missing or not a certificate, it was issued for
-            another net (the mission changed since it was verified), or some property
-            was not proven. The message says which, and how to get a valid one.
+            another net (the mission changed since it was verified), some required
+            property was not proven, or it lacks a property this version requires (it
+            was issued by an older version). The message says which, and how to get a
+            valid one.
     """
     path = Path(path)
     how = f"run 'coral-check verify MISSION --certificate {path}' and fix what it reports"
@@ -118,15 +134,25 @@ def check_certificate(net: Net, path: str | Path) -> CertificateCheck:
             f"{path}: issued for net {data.get('net_digest')!s}, but this mission compiles to "
             f"{digest}: it changed since it was verified; {how}"
         )
+    listed = [p for p in data.get("properties", []) if isinstance(p, dict)]
     if data.get("verdict") != Verdict.PROVEN.value:
         failing = [
             f"{p.get('key')} {p.get('verdict')}"
-            for p in data.get("properties", [])
-            if isinstance(p, dict) and p.get("verdict") != Verdict.PROVEN.value
+            for p in listed
+            if p.get("verdict") != Verdict.PROVEN.value and p.get("required", True)
         ]
         raise CertificateError(
             f"{path}: verification did not pass ({', '.join(failing) or data.get('verdict')}); "
             f"{how}"
+        )
+    gaps = certificate_gaps(net, listed)
+    if gaps:
+        version = data.get("tool_version", "an unknown version")
+        raise CertificateError(
+            f"{path}: the certificate does not show what this coral requires of the mission "
+            f"({', '.join(gaps)}): it was issued by coral {version}, which did not check "
+            "termination (no engine cycle, a final marking always reachable, 'require "
+            f"termination'); {how} with this version to get a new one"
         )
     return CertificateCheck(
         path=str(path),

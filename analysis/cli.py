@@ -5,6 +5,7 @@
     coral-check FILE...          compile, lint and verify each file; text, json, sarif or html
     coral-check lint FILE...     compile and lint only: fast, for pre-commit hooks
     coral-check verify FILE      one file's verification report, and its certificate
+    coral-check query NET ...    Model Checking Contest queries (analysis.query_cli)
 
 Exit codes (`analysis.outcome`): 0 no errors and every property proven; 1 errors in a
 mission (compile or lint) or a property violated; 3 a property inconclusive and none
@@ -52,15 +53,19 @@ __all__ = [
     "main",
 ]
 
+WARNINGS_HELP = (
+    " A property the mission does not require ('terminates' without 'require "
+    "termination') is only a warning when it fails: shown, never in the exit code."
+)
 EXIT_CODES_HELP = (
     "exit codes: 0 clean (no errors, every property proven), 1 errors in a mission or a "
     "property violated, 2 bad usage or unreadable file, 3 a property inconclusive (none "
-    "violated). With several files the worst wins: 2 > 1 > 3 > 0."
+    "violated). With several files the worst wins: 2 > 1 > 3 > 0." + WARNINGS_HELP
 )
 VERIFY_EXIT_CODES_HELP = (
     "exit codes: 0 clean (no errors, every property proven), 1 errors in the mission or a "
     "property violated, 2 bad usage or unreadable file, 3 a property inconclusive (none "
-    "violated)."
+    "violated)." + WARNINGS_HELP
 )
 LINT_EXIT_CODES_HELP = (
     "exit codes: 0 no errors (warnings allowed), 1 errors in a mission, "
@@ -80,9 +85,10 @@ def build_parser() -> argparse.ArgumentParser:
         prog="coral-check",
         description="Check CORAL missions (.coral) and PNML nets (.pnml) before they run: "
         "compile, lint, and prove boundedness, absence of deadlock, reachability of the "
-        "final markings, no dead transitions, no resource conflicts and the mission's own "
-        "assertions. Also: 'coral-check lint FILE...' (lint only, fast, for pre-commit "
-        "hooks) and 'coral-check verify FILE' (one report, with --certificate). "
+        "final markings, termination (no engine cycle, a final marking always reachable, "
+        "every fair run ends in one), no dead transitions, no resource conflicts and the "
+        "mission's own assertions. Also: 'coral-check lint FILE...' (lint only, fast, for "
+        "pre-commit hooks) and 'coral-check verify FILE' (one report, with --certificate). "
         "Formats: text for a terminal, json (docs/verify.md), sarif (SARIF 2.1.0 for code "
         "scanning), html (one self-contained page with the net and counterexamples).",
         epilog=EXIT_CODES_HELP,
@@ -124,9 +130,9 @@ def build_verify_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="coral-check verify",
         description="Compile a mission (or import a PNML net) and decide its properties: "
-        "boundedness, deadlock, final markings, dead transitions, resource conflicts, "
-        "and the mission's own assertions. Each verdict is proven, violated (with a "
-        "trace) or inconclusive (with the reason). Diagnostics go to stderr, the "
+        "boundedness, deadlock, final markings, termination, dead transitions, resource "
+        "conflicts, and the mission's own assertions. Each verdict is proven, violated "
+        "(with a trace) or inconclusive (with the reason). Diagnostics go to stderr, the "
         "report to stdout or OUT.",
         epilog=VERIFY_EXIT_CODES_HELP,
     )
@@ -220,6 +226,22 @@ def _add_search_options(parser: argparse.ArgumentParser) -> None:
         help="skip invariants, structural boundedness and siphons/traps",
     )
     parser.add_argument("--progress", action="store_true", help="show search progress on stderr")
+    parser.add_argument(
+        "--max-deadlocks",
+        type=_positive_int,
+        default=20,
+        metavar="N",
+        help="list at most N dead non-final markings, each with its own shortest trace; "
+        "the rest are counted (default 20)",
+    )
+    parser.add_argument(
+        "--max-edges",
+        type=_positive_int,
+        default=8_000_000,
+        metavar="N",
+        help="edge budget of the reachability graph that the termination properties "
+        "need, 12 bytes an edge; past it they are inconclusive (default 8000000)",
+    )
 
 
 def _positive_int(text: str) -> int:
@@ -272,6 +294,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _verify_main(args_list[1:])
         if args_list[:1] == ["lint"]:
             return _check_main(args_list[1:], lint_only=True)
+        if args_list[:1] == ["query"]:
+            from analysis.query_cli import query_main
+
+            return query_main(args_list[1:])
         return _check_main(args_list, lint_only=False)
     except BrokenPipeError:  # the reader went away (`coral-check ... | head`)
         devnull = os.open(os.devnull, os.O_WRONLY)
@@ -353,6 +379,8 @@ def _verify_options(args: argparse.Namespace, structural: bool) -> VerifyOptions
         por=args.por,
         structural=structural and not args.no_structure,
         progress=ProgressPrinter(sys.stderr, force=True) if args.progress else None,
+        max_deadlocks=args.max_deadlocks,
+        max_edges=args.max_edges,
     )
 
 

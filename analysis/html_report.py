@@ -153,13 +153,20 @@ def _counterexample(
             )
         items.append(f'<li data-step="{k}">{body}</li>')
     note = f'<p class="note">{_e(evidence.note)}</p>' if evidence.note else ""
+    if evidence.loop and evidence.marking is not None:
+        first, last = evidence.loop[0].number, evidence.loop[-1].number
+        back = format_tokens(evidence.marking.items())
+        note += (
+            f'<p class="note loop">Steps {first} to {last} (marked <em>repeat</em>) '
+            f"repeat forever: they lead back to <code>{_e(back)}</code>.</p>"
+        )
     if problem:
         note += f'<p class="note warn">Replay stopped: {_e(problem)}.</p>'
     panes = "".join(_source_pane(f, outcome.sources[f], i) for i, f in enumerate(files))
     picture = _drawing_box(drawing.svg) if drawing.svg else ""
     return (
         f'<section class="cx" id="{_e(section_id)}">'
-        f"<h4>{_e(prop.title)} {_badge(prop.verdict.value)}</h4>"
+        f"<h4>{_e(prop.title)} {_verdict_badge(prop)}</h4>"
         f'<p class="detail">{_e(prop.detail)}</p>{note}'
         '<div class="controls" hidden>'
         '<button type="button" data-go="first">&#xAB; first</button>'
@@ -171,7 +178,47 @@ def _counterexample(
         f'{picture}<div class="cx-body"><ol class="steps" start="0">{"".join(items)}</ol>'
         f'<div class="sources">{panes}</div></div>'
         f'<script type="application/json" class="cx-data">'
-        f"{_script_json({'steps': data_steps})}</script></section>"
+        f"{_script_json({'steps': data_steps})}</script>{_more_counterexamples(prop)}</section>"
+    )
+
+
+def _verdict_badge(prop: PropertyResult) -> str:
+    """The verdict, or ``warning`` for a property that is not required and not proven."""
+    if prop.warning:
+        return (
+            _badge("warning")
+            + f' <span class="muted">({_e(prop.verdict.value)}, not required)</span>'
+        )
+    return _badge(prop.verdict.value)
+
+
+def _more_counterexamples(prop: PropertyResult) -> str:
+    """Every further counterexample (the other dead markings) as a list of steps."""
+    if not prop.more_evidence:
+        return ""
+    total = 1 + len(prop.more_evidence) + prop.omitted
+    blocks = []
+    for number, evidence in enumerate(prop.more_evidence, start=2):
+        steps = "".join(
+            f'<li>{_e(step.description)} <span class="loc">'
+            f"{_e(f'{step.span.file}:{step.span.line}' if step.span else 'no source position')}"
+            "</span></li>"
+            for step in evidence.trace
+        )
+        reached = format_tokens((evidence.marking or {}).items())
+        blocks.append(
+            f'<li class="more-cx"><p>Counterexample {number} of {total}: reaches '
+            f"<code>{_e(reached)}</code> in {len(evidence.trace)} step(s)</p>"
+            f'<ol class="trace">{steps}</ol></li>'
+        )
+    rest = (
+        f'<p class="muted">{prop.omitted} more not listed (raise --max-deadlocks).</p>'
+        if prop.omitted
+        else ""
+    )
+    return (
+        f"<details open><summary>{len(prop.more_evidence)} more counterexample(s)</summary>"
+        f'<ol class="more">{"".join(blocks)}</ol>{rest}</details>'
     )
 
 
@@ -218,7 +265,7 @@ def _verdict_table(report: Report, prefix: str) -> str:
         where = f' <span class="muted">({_e(prop.span)})</span>' if prop.span else ""
         rows.append(
             f'<tr class="prop" data-key="{_e(prop.key)}"><td>{_e(prop.title)}{where}</td>'
-            f"<td>{_badge(prop.verdict.value)}</td><td>{_e(prop.method)}</td>"
+            f"<td>{_verdict_badge(prop)}</td><td>{_e(prop.method)}</td>"
             f"<td>{_e(prop.detail)}{evidence}</td></tr>"
         )
     return (
@@ -436,6 +483,7 @@ border-radius:6px;background:#f6f8fa;cursor:pointer}
 ol.steps{margin:.3rem 0;padding-left:2.2rem}
 ol.steps li{padding:.25rem .4rem;border-radius:4px}
 ol.steps li.current{background:var(--hl)}
+ol.trace{margin:.2rem 0 .6rem;padding-left:2.2rem}
 .loc{color:var(--muted);font-size:.9em}.after{display:block;color:var(--muted);font-size:.9em}
 pre{margin:.2rem 0;background:#f6f8fa;border-radius:4px;padding:.3rem 0;overflow:auto}
 pre .ln{display:block;padding:0 .6rem;white-space:pre}

@@ -24,6 +24,7 @@ from analysis.statespace import StateSpace, explore
 from coral_lang import ast
 from coral_lang.compiler import CompileResult
 from coral_lang.diagnostics import Diagnostic, Severity, Span
+from coral_lang.formula import places_of
 from coral_lang.net import Net, PlaceKind, TransitionKind
 from coral_lang.profile import VehicleProfile
 
@@ -203,6 +204,7 @@ def _place_usage(net: Net) -> Iterator[Diagnostic]:
         produced.update(p for p, _ in tr.outputs)
     in_finals = {p for f in net.finals for p, _ in f.tokens}
     in_asserts = {p for a in net.assertions for p, _ in a.places}
+    in_asserts.update(p for a in net.assertions if a.formula for p in places_of(a.formula))
     for place in net.places:
         if place.kind is not PlaceKind.MISSION:
             continue

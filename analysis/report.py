@@ -114,8 +114,10 @@ class PropertyResult:
 
     Attributes:
         key: Stable identifier: ``deadlock``, ``bounded``, ``final_reachable``,
-            ``dead_transitions``, ``never_marked_places``, ``resource_conflicts``, or
-            ``assert:N`` for the N-th assertion of the mission (from 1).
+            ``dead_transitions``, ``never_marked_places``, ``resource_conflicts``,
+            ``no_engine_cycle``, ``final_always_reachable``, ``terminates`` (see
+            `analysis.termination`), or ``assert:N`` for the N-th assertion of the
+            mission (from 1).
         title: What the property says, for people.
         verdict: proven, violated or inconclusive.
         method: What decided it.
@@ -124,6 +126,13 @@ class PropertyResult:
             property is proven).
         span: Where the property was written (assertions).
         items: Names involved (unbounded places, dead transitions, ...).
+        more_evidence: Further counterexamples after ``evidence``, each on its own
+            (``deadlock``: every other dead non-final marking with its shortest trace,
+            up to ``VerifyOptions.max_deadlocks`` in all).
+        omitted: How many more counterexamples were found but not listed.
+        required: Whether the property counts towards the report's verdict, exit code
+            and certificate. A property that is not required (``terminates`` without
+            ``require termination``) and not proven is a *warning*.
     """
 
     key: str
@@ -134,6 +143,14 @@ class PropertyResult:
     evidence: Evidence | None = None
     span: Span | None = None
     items: tuple[str, ...] = ()
+    more_evidence: tuple[Evidence, ...] = ()
+    omitted: int = 0
+    required: bool = True
+
+    @property
+    def warning(self) -> bool:
+        """Not proven, but not required either: shown, never failing."""
+        return not self.required and self.verdict is not Verdict.PROVEN
 
     def to_dict(self) -> dict[str, object]:
         """JSON form."""
@@ -146,6 +163,9 @@ class PropertyResult:
             "items": list(self.items),
             "location": self.span.to_dict() if self.span else None,
             "evidence": self.evidence.to_dict() if self.evidence else None,
+            "more_evidence": [e.to_dict() for e in self.more_evidence],
+            "omitted": self.omitted,
+            "required": self.required,
         }
 
 
@@ -194,9 +214,12 @@ class Report:
 
     @property
     def verdict(self) -> Verdict:
-        """The worst verdict over all properties (violated > inconclusive > proven)."""
+        """The worst verdict over the required properties (violated > inconclusive >
+        proven); a property that is not required is a warning at most."""
         return max(
-            (p.verdict for p in self.properties), key=_SEVERITY.__getitem__, default=Verdict.PROVEN
+            (p.verdict for p in self.properties if p.required),
+            key=_SEVERITY.__getitem__,
+            default=Verdict.PROVEN,
         )
 
     def property(self, key: str) -> PropertyResult:
@@ -251,26 +274,45 @@ class Report:
         ]
         width = max((len(p.title) for p in self.properties), default=10)
         for result in self.properties:
-            lines.append(
-                f"  {paint(result.verdict)}  {result.title.ljust(width)}  [{result.method}]"
-            )
+            word = paint.warning(result.verdict) if result.warning else paint(result.verdict)
+            lines.append(f"  {word}  {result.title.ljust(width)}  [{result.method}]")
+            if result.warning:
+                lines.append(
+                    f"      {result.verdict.value}, but not required: a warning, not a failure"
+                )
             if result.detail:
                 lines.append(f"      {result.detail}")
             if result.evidence and result.verdict is not Verdict.PROVEN:
-                lines.extend("      " + step.render() for step in result.evidence.trace)
-                if result.evidence.loop:
-                    lines.append("      then repeat:")
-                    lines.extend("      " + step.render() for step in result.evidence.loop)
-                if result.evidence.marking is not None:
-                    lines.append(f"      reaching {_format_marking(result.evidence.marking)}")
-                if result.evidence.note:
-                    lines.append(f"      {result.evidence.note}")
-        counts = {v: sum(1 for p in self.properties if p.verdict is v) for v in Verdict}
+                lines.extend(_render_evidence(result.evidence))
+                for number, more in enumerate(result.more_evidence, start=2):
+                    lines.append(f"      counterexample {number}:")
+                    lines.extend(_render_evidence(more))
+                if result.omitted:
+                    lines.append(f"      ... and {result.omitted} more not listed")
+        counts = {
+            v: sum(1 for p in self.properties if p.verdict is v and not p.warning) for v in Verdict
+        }
+        warnings = sum(1 for p in self.properties if p.warning)
         lines.append(
             f"{paint(self.verdict)}: {counts[Verdict.PROVEN]} proven, "
             f"{counts[Verdict.VIOLATED]} violated, {counts[Verdict.INCONCLUSIVE]} inconclusive"
+            + (f", {warnings} warning{'' if warnings == 1 else 's'}" if warnings else "")
         )
         return "\n".join(lines)
+
+
+def _render_evidence(evidence: Evidence) -> list[str]:
+    """A trace (then its loop, for an infinite run), the marking, the note."""
+    lines = ["      " + step.render() for step in evidence.trace]
+    if evidence.loop:
+        lines.append("      then repeat forever:" if evidence.marking else "      then repeat:")
+        lines.extend("      " + step.render() for step in evidence.loop)
+    if evidence.marking is not None:
+        where = "back at" if evidence.loop else "reaching"
+        lines.append(f"      {where} {_format_marking(evidence.marking)}")
+    if evidence.note:
+        lines.append(f"      {evidence.note}")
+    return lines
 
 
 def _format_marking(marking: dict[str, int]) -> str:
@@ -291,3 +333,8 @@ class _Paint:
         if not self.color:
             return word
         return f"\033[{_COLOURS[verdict]}m{word}\033[0m"
+
+    def warning(self, verdict: Verdict) -> str:
+        """``WARNING`` in place of the verdict of a property that is not required."""
+        word = "WARNING".ljust(12)
+        return f"\033[33m{word}\033[0m" if self.color else word

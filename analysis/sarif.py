@@ -9,7 +9,11 @@ compiler, CORAL2xx from lint) and one rule per verified property, ``CORAL-V-<pro
   inconclusive, located where the property is written (assertions) or where it fails
   (the transition that reaches the deadlock, the dead transitions, the unbounded
   places...). A counterexample is a code flow: one thread flow whose locations are the
-  trace's steps, each pointing at the source line of the transition fired.
+  trace's steps, each pointing at the source line of the transition fired; the loop of
+  an infinite run (a lasso) follows at ``nestingLevel`` 1, each step's ``properties``
+  saying ``"loop": true``. A property the mission does not require (``terminates``
+  without ``require termination``) is a ``warning`` when violated, a ``note`` when
+  inconclusive. The ``deadlock`` property gives one result per dead marking listed.
 
 Paths are relative to the current directory under ``uriBaseId`` ``%SRCROOT%``, as
 GitHub code scanning expects; files outside it get absolute ``file:`` URIs. Columns
@@ -57,12 +61,26 @@ PROPERTY_RULES: dict[str, tuple[str, str]] = {
         "CORAL-V-resource-conflicts",
         "no two commands in flight drive one vehicle resource",
     ),
+    "no_engine_cycle": (
+        "CORAL-V-no-engine-cycle",
+        "no cycle of reachable markings is made only of engine transitions",
+    ),
+    "final_always_reachable": (
+        "CORAL-V-final-always-reachable",
+        "some declared final marking is reachable from every reachable marking",
+    ),
+    "terminates": (
+        "CORAL-V-terminates",
+        "every weakly fair run ends in a declared final marking",
+    ),
+    "require": ("CORAL-V-require", "the mission's requirement can be verified"),
     "assert": ("CORAL-V-assert", "the mission's own assertion holds"),
 }
 """Property key (``assert:N`` -> ``assert``) -> (rule id, what the property says)."""
 
 _LEVELS = {Severity.ERROR: "error", Severity.WARNING: "warning", Severity.NOTE: "note"}
 _VERDICT_LEVELS = {Verdict.VIOLATED: "error", Verdict.INCONCLUSIVE: "warning"}
+_WARNING_LEVELS = {Verdict.VIOLATED: "warning", Verdict.INCONCLUSIVE: "note"}
 
 Json = dict[str, object]
 
@@ -210,35 +228,72 @@ def _code_flow(evidence: Evidence, outcome: FileOutcome, locator: _Locator) -> J
             location = locator.location(step.span, outcome.path, text)
         else:
             location = {"message": {"text": text}}
-        locations.append({"location": location, "executionOrder": step.number})
+        entry: Json = {"location": location, "executionOrder": step.number}
+        if prefix:  # the loop of a lasso (or of a pumping sequence)
+            entry["nestingLevel"] = 1
+            entry["properties"] = {"loop": True}
+        locations.append(entry)
     flow: Json = {"threadFlows": [{"locations": locations}]}
     summary = evidence.note
     if evidence.marking is not None:
         reached = format_tokens(evidence.marking.items())
-        summary = f"reaches {reached}" + (f"; {summary}" if summary else "")
+        if evidence.loop:
+            first, last = evidence.loop[0].number, evidence.loop[-1].number
+            reached = f"steps {first}-{last} repeat forever from {reached}"
+        else:
+            reached = f"reaches {reached}"
+        summary = reached + (f"; {summary}" if summary else "")
     if summary:
         flow["message"] = {"text": summary}
     return flow
 
 
-def _property_result(prop: PropertyResult, outcome: FileOutcome, locator: _Locator) -> Json:
+def _property_results(prop: PropertyResult, outcome: FileOutcome, locator: _Locator) -> list[Json]:
+    """One result for a failed property, and one more per further counterexample
+    (every other dead marking of ``deadlock``), each with its code flow."""
     text = f"{prop.title}: {prop.verdict.value} [{prop.method}]. {prop.detail}".rstrip(". ")
+    if prop.warning:
+        text += " (not required: a warning)"
     spans = _where(prop, outcome.net)
     locations = [locator.location(s, outcome.path) for s in spans] or [
         locator.location(None, outcome.path)
     ]
+    level = (_WARNING_LEVELS if prop.warning else _VERDICT_LEVELS)[prop.verdict]
+    properties: Json = {"property": prop.key, "verdict": prop.verdict.value}
+    if not prop.required:
+        properties["required"] = False
     result: Json = {
         "ruleId": property_rule_id(prop.key),
-        "level": _VERDICT_LEVELS[prop.verdict],
+        "level": level,
         "message": {"text": text},
         "locations": locations,
-        "properties": {"property": prop.key, "verdict": prop.verdict.value},
+        "properties": properties,
     }
     if prop.evidence is not None:
         flow = _code_flow(prop.evidence, outcome, locator)
         if flow is not None:
             result["codeFlows"] = [flow]
-    return result
+    results = [result]
+    total = 1 + len(prop.more_evidence) + prop.omitted
+    for number, evidence in enumerate(prop.more_evidence, start=2):
+        reached = format_tokens((evidence.marking or {}).items())
+        steps = [s.span for s in evidence.trace if s.span is not None]
+        more: Json = {
+            "ruleId": property_rule_id(prop.key),
+            "level": level,
+            "message": {
+                "text": f"{prop.title}: {prop.verdict.value} [{prop.method}]. "
+                f"Counterexample {number} of {total}: {reached} is reachable in "
+                f"{len(evidence.trace)} step(s)"
+            },
+            "locations": [locator.location(steps[-1] if steps else None, outcome.path)],
+            "properties": {**properties, "counterexample": number},
+        }
+        flow = _code_flow(evidence, outcome, locator)
+        if flow is not None:
+            more["codeFlows"] = [flow]
+        results.append(more)
+    return results
 
 
 def to_sarif(
@@ -275,11 +330,9 @@ def to_sarif(
             continue
         results.extend(_diagnostic_result(d, outcome, locator) for d in outcome.diagnostics)
         if outcome.report is not None:
-            results.extend(
-                _property_result(p, outcome, locator)
-                for p in outcome.report.properties
-                if p.verdict is not Verdict.PROVEN
-            )
+            for p in outcome.report.properties:
+                if p.verdict is not Verdict.PROVEN:
+                    results.extend(_property_results(p, outcome, locator))
     for result in results:
         rule_id = str(result["ruleId"])
         if rule_id in index:

@@ -89,6 +89,11 @@ BLOCK_CELLS = 1 << 22
 
 Markings = npt.NDArray[np.int64]
 Predicate = Callable[[Markings], npt.NDArray[np.bool_]]
+StopWhen = Callable[[int, Markings], bool]
+"""``stop_when(first_state, markings)``: see `explore`."""
+
+STOPPED_BY_REQUEST = "stopped: stop_when asked to"
+"""``stopped_reason`` when `explore`'s ``stop_when`` ended the search."""
 Clock = Callable[[], float]
 
 
@@ -593,6 +598,7 @@ class _Explorer:
         self.progress = progress
         self.chunk = chunk
         self.clock = clock
+        self.stop_when: StopWhen | None = None
         self.start = clock()
         small = max_states is not None and max_states < np.iinfo(np.int32).max // 2
         self.index_type = np.int32 if small else np.int64
@@ -893,6 +899,14 @@ class _Explorer:
         new[fields, owner] += effects.values.take(entry).astype(self.dtype)
         return new
 
+    def offer(self, new: npt.NDArray[np.integer], start: int) -> None:
+        """Show the new states ``start ...`` (field columns ``new``) to ``stop_when``."""
+        if self.stop_when is None or not new.shape[1]:
+            return
+        if self.stop_when(start, self.fnet.places(new, self.layout).T):
+            self.stopped = STOPPED_BY_REQUEST
+            raise _Stop
+
     def record(self, new: npt.NDArray[np.integer]) -> None:
         """Update the bounds and the largest marking with new field columns."""
         counts = new.take(self.count_fields, axis=0)
@@ -935,6 +949,7 @@ class _Explorer:
             new = self.successor_cols(cols, src.take(first), trans.take(first))
             out.append(new)
             self.record(new)
+            self.offer(new, added.start)
         if added.cut:
             self.stopped = f"state budget reached (max_states={self.max_states})"
         return added
@@ -1044,6 +1059,7 @@ class _Explorer:
 
     def run(self) -> None:
         self.store.add(self.layout.pack(self.cn.initial[None, :]))
+        self.offer(self.fnet.initial[:, None], 0)
         # A layer is a list of column blocks (as produced, never joined into one array:
         # the widest layers are the largest temporaries) with their sleep sets.
         layer: list[npt.NDArray[np.integer]] = [self.fnet.initial[:, None].astype(self.dtype)]
@@ -1146,6 +1162,7 @@ class _Explorer:
         self.via.append(trans.take(first).astype(self.via_type))
         new = new_cols.take(first, axis=1)
         self.record(new)
+        self.offer(new, start)
         enables = counts.take(first)
         expanded = int(np.count_nonzero(enables >= 0))  # all but the last level's
         self.account(enables[:expanded], start)
@@ -1296,6 +1313,7 @@ def explore(
     progress: ProgressCallback | None = None,
     chunk: int = DEFAULT_CHUNK,
     clock: Clock = time.perf_counter,
+    stop_when: StopWhen | None = None,
 ) -> StateSpace:
     """Explore the reachable markings of ``net`` breadth first.
 
@@ -1315,10 +1333,15 @@ def explore(
         chunk: frontier rows per vectorised step (and most candidates of a narrow
             round), i.e. the work between two `time_limit`/`progress` checks.
         clock: seconds counter; tests pass a fake one.
+        stop_when: called as ``stop_when(first, markings)`` with every batch of newly
+            stored states, numbered ``first, first + 1, ...`` (BFS order), their
+            markings as rows ``(n, places)``; returning true ends the search there
+            (``stopped_reason`` is `STOPPED_BY_REQUEST`). A search for a marking
+            uses it to stop at the first (hence shallowest) hit.
 
     Returns:
         The `StateSpace`; ``complete`` is false, with ``stopped_reason``, when a budget
-        stopped it.
+        or ``stop_when`` stopped it.
     """
     cn = net if isinstance(net, CompactNet) else CompactNet.from_net(net)
     reducer = None
@@ -1327,6 +1350,7 @@ def explore(
         reducer = StubbornSets(cn, vis)
     _settle_allocator()
     explorer = _Explorer(cn, max_states, time_limit, reducer, progress, chunk, clock)
+    explorer.stop_when = stop_when
     with contextlib.suppress(_Stop):  # a budget ran out; the reason is recorded
         explorer.run()
     seconds = clock() - explorer.start

@@ -84,8 +84,15 @@ def summary_line(outcome: FileOutcome, lint_only: bool, color: bool = False) -> 
             f"{outcome.path}: {_paint('ok', '32', color)}{warned}, {outcome.net.summary()}, "
             f"digest {outcome.net.digest()}"
         )
-    return f"{outcome.path}: {_paint(status, _STATUS_COLOURS[status], color)}, " + _count(
-        warnings, "warning"
+    # A property that failed but is not required must not hide behind "proven".
+    flagged = sum(1 for p in outcome.report.properties if p.warning) if outcome.report else 0
+    tail = ""
+    if flagged and status != "violated":
+        tail = f", {_paint(_count(flagged, 'property warning'), '33', color)}"
+    return (
+        f"{outcome.path}: {_paint(status, _STATUS_COLOURS[status], color)}, "
+        + _count(warnings, "warning")
+        + tail
     )
 
 

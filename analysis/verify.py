@@ -40,7 +40,15 @@ from analysis.report import (
     Verdict,
     make_trace,
 )
+from analysis.stategraph import GraphError, StateGraph, build_graph
 from analysis.statespace import StateSpace, explore
+from analysis.termination import (
+    DEFAULT_MAX_DEADLOCKS,
+    DEFAULT_MAX_EDGES,
+    TerminationBudget,
+    check_termination,
+    non_final_dead_states,
+)
 from coral_lang.diagnostics import Span
 from coral_lang.net import AssertKind, Net, PlaceKind, format_tokens
 
@@ -81,6 +89,11 @@ class VerifyOptions:
             search is incomplete (a small tree is always built first: it proves an
             unbounded net unbounded in milliseconds).
         progress: Called during long explorations (see `analysis.progress`).
+        max_deadlocks: Dead non-final markings the ``deadlock`` property lists, each
+            with its own shortest trace; the rest are counted.
+        max_edges: Edge budget of the reachability graph the termination properties
+            need (`analysis.termination`; 12 bytes an edge); past it they are
+            inconclusive (None: no limit).
     """
 
     max_states: int | None = 2_000_000
@@ -90,6 +103,8 @@ class VerifyOptions:
     z3_timeout_ms: int = 10_000
     coverability_nodes: int = 20_000
     progress: ProgressCallback | None = None
+    max_deadlocks: int = DEFAULT_MAX_DEADLOCKS
+    max_edges: int | None = DEFAULT_MAX_EDGES
 
 
 def verify(net: Net, options: VerifyOptions | None = None) -> Report:
@@ -125,6 +140,7 @@ def run_verification(net: Net, options: VerifyOptions | None = None) -> Verifica
         checker.bounded(),
         checker.deadlock(),
         *checker.final_reachable(),
+        *checker.termination(),
         checker.dead_transitions(),
         checker.never_marked_places(),
         *checker.resource_conflicts(),
@@ -206,8 +222,26 @@ class _Checker:
         )
         self.exact = self.space.complete and not self.space.reduced
         self.method = EXPLICIT_POR if self.space.reduced else EXPLICIT
+        self._graph: StateGraph | GraphError | None = None
 
     # -- helpers ------------------------------------------------------------------------
+
+    def state_graph(self) -> StateGraph:
+        """The reachability graph of the explored space, built on first use and then
+        shared by every property that needs edges; raises `GraphError` (also cached)
+        when the space is incomplete or reduced."""
+        if self._graph is None:
+            try:
+                self._graph = build_graph(
+                    self.space,
+                    max_edges=self.options.max_edges,
+                    time_limit=self.options.time_limit,
+                )
+            except GraphError as exc:
+                self._graph = exc
+        if isinstance(self._graph, GraphError):
+            raise self._graph
+        return self._graph
 
     def figures(self) -> StateSpaceFigures:
         space = self.space
@@ -391,25 +425,32 @@ class _Checker:
         title = "no deadlock (every dead marking is a declared final marking)"
         if not net.finals:
             title = "no deadlock (no reachable marking without an enabled transition)"
-        finals = set(net.final_markings())
-        for state in self.space.deadlocks[:100_000]:
-            marking = self.space.marking(int(state))
-            if marking in finals:
-                continue
-            depth = self.space.depth_of(int(state))
+        stuck = non_final_dead_states(self.space)
+        if stuck.size:
+            state = int(stuck[0])
+            depth = self.space.depth_of(state)
             shortest = "" if self.space.reduced else "shortest "
             what = (
                 "a dead marking that is not a declared final marking"
-                if finals
+                if net.finals
                 else ("a marking in which no transition is enabled")
             )
+            listed = stuck[: max(1, self.options.max_deadlocks)]
+            detail = f"{what} is reachable in {depth} step(s); {shortest}trace below"
+            if stuck.size > 1:
+                found = "in all" if self.space.complete else "found"
+                detail += f"; {stuck.size} such dead markings {found}, each with its own trace"
+                if listed.size < stuck.size:
+                    detail += f" (the first {listed.size} listed)"
             return PropertyResult(
                 "deadlock",
                 title,
                 Verdict.VIOLATED,
                 self.method,
-                f"{what} is reachable in {depth} step(s); {shortest}trace below",
-                self._witness(int(state)),
+                detail,
+                self._witness(state),
+                more_evidence=tuple(self._witness(int(s)) for s in listed[1:]),
+                omitted=int(stuck.size - listed.size),
             )
         if self.space.complete:
             ends = len(self.space.deadlocks)
@@ -444,6 +485,20 @@ class _Checker:
             Verdict.INCONCLUSIVE,
             f"{self.method}; {result.method}",
             f"{self._incomplete()}; {result.explain()}",
+        )
+
+    def termination(self) -> list[PropertyResult]:
+        """``no_engine_cycle``, ``final_always_reachable``, ``terminates`` (for missions;
+        see `analysis.termination`)."""
+        bounded = self.cover.bounded is not False  # else the small budgets, as above
+        return check_termination(
+            self.space,
+            TerminationBudget(
+                max_edges=self.options.max_edges,
+                max_states=self.options.max_states if bounded else UNBOUNDED_STATES,
+                time_limit=self.options.time_limit if bounded else UNBOUNDED_SECONDS,
+            ),
+            self.state_graph,
         )
 
     def final_reachable(self) -> list[PropertyResult]:
@@ -661,6 +716,13 @@ class _Checker:
         results = []
         for number, assertion in enumerate(self.net.assertions, start=1):
             key = f"assert:{number}"
+            if assertion.temporal:
+                from analysis.temporal import check_temporal
+
+                results.append(
+                    check_temporal(self.net, self.space, self.state_graph, assertion, key)
+                )
+                continue
             title = assertion.describe()
             columns = [(self.net.place_index(p), w) for p, w in assertion.places]
 

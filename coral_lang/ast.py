@@ -156,7 +156,125 @@ class AssertDecl:
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
-Declaration = Const | Places | Final | TransitionDecl | Include | AssertDecl
+# -- temporal properties -------------------------------------------------------------------
+# The expressions of ``assert always/eventually/leadsto/ltl/ctl``: one tree for the three
+# logics; the compiler checks that each operator belongs to the logic it is used in and
+# lowers the tree to `coral_lang.formula`.
+
+
+@dataclass(slots=True)
+class Sum:
+    """``p + q*2 + 1``: places (with weights) and whole numbers or integer constants. A
+    `TokenRef` term may name a constant: the compiler decides, knowing the places."""
+
+    terms: tuple[TokenRef | Number, ...]
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(slots=True)
+class Comparison:
+    """``left op right`` with ``op`` one of ``< <= == != >= >``."""
+
+    left: Sum
+    op: str
+    right: Sum
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(slots=True)
+class Word:
+    """``true``, ``false``, ``deadlock`` or ``final``."""
+
+    word: str
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(slots=True)
+class TransitionRef:
+    """A transition named in a property: ``check_depth``, or one of its replies,
+    ``check_depth.timeout``."""
+
+    name: str
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(slots=True)
+class Call:
+    """``in_flight(t, ...)``, ``fires(t, ...)`` or ``fireable(t, ...)``."""
+
+    function: str
+    transitions: tuple[TransitionRef, ...]
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(slots=True)
+class Unary:
+    """A prefix operator: ``not``, the LTL ``X F G``, the CTL ``AX AF AG EX EF EG``."""
+
+    op: str
+    arg: Expr
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+    op_span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(slots=True)
+class Binary:
+    """An infix operator: ``and``, ``or`` (two or more ``args``), ``->``, ``U`` and
+    ``leadsto`` (exactly two)."""
+
+    op: str
+    args: tuple[Expr, ...]
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+    op_span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(slots=True)
+class PathUntil:
+    """The CTL ``A [ left U right ]`` or ``E [ left U right ]``."""
+
+    quantifier: str
+    left: Expr
+    right: Expr
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+Expr = TokenRef | Comparison | Word | Call | Unary | Binary | PathUntil
+"""A property expression. A bare `TokenRef` ``p*k`` means "``p`` holds at least ``k``
+tokens"."""
+
+
+class TemporalKind(enum.Enum):
+    """Which form a temporal ``assert`` has."""
+
+    ALWAYS = "always"
+    EVENTUALLY = "eventually"
+    LEADSTO = "leadsto"
+    LTL = "ltl"
+    CTL = "ctl"
+
+
+@dataclass(slots=True)
+class TemporalAssert:
+    """``assert always P``, ``assert eventually P``, ``assert P leadsto Q`` (``formula``
+    is then the `Binary` ``leadsto``), ``assert ltl φ``, ``assert ctl φ``."""
+
+    kind: TemporalKind
+    formula: Expr
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(slots=True)
+class Require:
+    """``require termination``: what the mission demands of verification."""
+
+    name: str
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+    name_span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+Declaration = (
+    Const | Places | Final | TransitionDecl | Include | AssertDecl | TemporalAssert | Require
+)
 
 
 @dataclass(slots=True)

@@ -13,6 +13,8 @@ CODES: dict[str, str] = {
     "CORAL005": "bad value (wrong kind of constant, negative tokens, zero weight)",
     "CORAL006": "vehicle profile not found or system name mismatch",
     "CORAL007": "missing mission header",
+    "CORAL008": "temporal property outside its logic (or an atom it cannot use)",
+    "CORAL009": "unknown requirement",
     "CORAL101": "unknown command",
     "CORAL102": "parameter count wrong, parameter missing, unknown or given twice",
     "CORAL103": "parameter type wrong",

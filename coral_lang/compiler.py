@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from coral_lang import ast, units
@@ -44,10 +44,15 @@ from coral_lang.net import (
     Value,
 )
 from coral_lang.parser import parse
+from coral_lang.printer import format_temporal
 from coral_lang.profile import CommandSpec, ParamSpec, VehicleProfile, load_bundled_profile
+from coral_lang.properties import Names, PropertyLowering, TransitionInfo
 
 PENDING_SUFFIX = ".pending"
 FREE_SUFFIX = ".free"
+REQUIREMENTS = ("termination",)
+"""What a ``require`` line may name: ``termination`` demands that every run of the
+mission (under the runtime's fairness) ends in a declared final marking."""
 
 
 @dataclass
@@ -205,9 +210,12 @@ class _Compiler:
         finals = self._finals(places, consts)
         assertions = self._assertions(places, consts)
         transitions, pending = self._transitions(places, consts, profile, root.vehicle)
+        assertions.update(self._temporal(places, consts, profile, finals))
+        requirements = self._requirements()
         net: Net | None = None
         if not any(d.severity is Severity.ERROR for d in self.diagnostics):
-            net = self._build(root, places, pending, transitions, finals, assertions)
+            in_order = [assertions[i] for i in sorted(assertions)]  # source order
+            net = self._build(root, places, pending, transitions, finals, in_order, requirements)
         return CompileResult(
             net, sort_diagnostics(self.diagnostics), self.sources, self.missions, profile
         )
@@ -420,9 +428,10 @@ class _Compiler:
 
     def _assertions(
         self, places: dict[str, _PlaceInfo], consts: dict[str, _ConstInfo]
-    ) -> list[Assertion]:
-        assertions: list[Assertion] = []
-        for declaration, _ in self.declarations:
+    ) -> dict[int, Assertion]:
+        """``never``, ``reachable`` and ``bound``, by position among the declarations."""
+        assertions: dict[int, Assertion] = {}
+        for position, (declaration, _) in enumerate(self.declarations):
             if not isinstance(declaration, ast.AssertDecl):
                 continue
             tokens = self._tokens(declaration.tokens, places, consts, "an assertion")
@@ -432,10 +441,86 @@ class _Compiler:
                 if bound is None:
                     continue
             if tokens is not None:
-                assertions.append(
-                    Assertion(AssertKind(declaration.kind.value), tokens, bound, declaration.span)
+                assertions[position] = Assertion(
+                    AssertKind(declaration.kind.value), tokens, bound, declaration.span
                 )
         return assertions
+
+    def _temporal(
+        self,
+        places: dict[str, _PlaceInfo],
+        consts: dict[str, _ConstInfo],
+        profile: VehicleProfile | None,
+        finals: list[FinalMarking],
+    ) -> dict[int, Assertion]:
+        """``assert always/eventually/leadsto/ltl/ctl``, lowered by `PropertyLowering`,
+        by position among the declarations."""
+        declared = [
+            (position, d)
+            for position, (d, _) in enumerate(self.declarations)
+            if isinstance(d, ast.TemporalAssert)
+        ]
+        if not declared:
+            return {}
+        transitions: dict[str, TransitionInfo] = {}
+        pending: list[str] = []
+        for declaration, _ in self.declarations:
+            if not isinstance(declaration, ast.TransitionDecl):
+                continue
+            if declaration.name in transitions:
+                continue
+            action = declaration.action
+            if action is None:
+                transitions[declaration.name] = TransitionInfo(None, ())
+                continue
+            spec = profile.command(action.command) if profile is not None else None
+            replies = spec.replies if spec is not None else tuple(r.reply for r in action.replies)
+            pending_name = declaration.name + PENDING_SUFFIX
+            pending.append(pending_name)
+            transitions[declaration.name] = TransitionInfo(pending_name, tuple(replies))
+        names = Names(
+            places=tuple(places),
+            constants=frozenset(consts),
+            transitions=transitions,
+            finals=[f.tokens for f in finals],
+            state_places=(*places, *pending),
+        )
+        lowering = PropertyLowering(
+            names,
+            lambda value, what, minimum: self._count(value, consts, what, minimum),
+            self.error,
+        )
+        assertions: dict[int, Assertion] = {}
+        for position, declaration in declared:
+            lowered = lowering.lower(declaration)
+            if lowered is not None:
+                kind, formula = lowered
+                assertions[position] = Assertion(
+                    kind,
+                    (),
+                    span=declaration.span,
+                    formula=formula,
+                    text=format_temporal(declaration),
+                )
+        return assertions
+
+    def _requirements(self) -> tuple[str, ...]:
+        """The names of the ``require`` lines, checked; each once, in source order."""
+        found: dict[str, None] = {}
+        for declaration, _ in self.declarations:
+            if not isinstance(declaration, ast.Require):
+                continue
+            if declaration.name not in REQUIREMENTS:
+                self.error(
+                    "CORAL009",
+                    f"unknown requirement '{declaration.name}'"
+                    f"{did_you_mean(declaration.name, REQUIREMENTS)}",
+                    declaration.name_span,
+                    f"known requirements: {', '.join(REQUIREMENTS)}",
+                )
+                continue
+            found[declaration.name] = None
+        return tuple(found)
 
     def _transitions(
         self,
@@ -787,6 +872,7 @@ class _Compiler:
         transitions: list[Transition],
         finals: list[FinalMarking],
         assertions: list[Assertion],
+        requirements: tuple[str, ...] = (),
     ) -> Net:
         mission_places = [
             Place(
@@ -821,6 +907,7 @@ class _Compiler:
             assertions=tuple(assertions),
             vehicle=root.vehicle,
             sources=tuple(self.sources),
+            requirements=requirements,
         )
 
 
@@ -839,8 +926,6 @@ def _with_complements(transition: Transition, bounded: dict[str, str]) -> Transi
             changed = True
     if not changed:
         return transition
-    from dataclasses import replace
-
     return replace(transition, inputs=tuple(pre.items()), outputs=tuple(post.items()))
 
 

@@ -35,6 +35,15 @@ class Kind(enum.Enum):
     COLON = "':'"
     ARROW = "'->'"
     LE = "'<='"
+    LT = "'<'"
+    GE = "'>='"
+    GT = "'>'"
+    EQEQ = "'=='"
+    NE = "'!='"
+    PLUS = "'+'"
+    LBRACKET = "'['"
+    RBRACKET = "']'"
+    DOT = "'.'"
     SLASH = "'/'"
     MINUS = "'-'"
     ERROR = "bad character"  # already reported by the lexer; the parser stays quiet on it
@@ -45,12 +54,14 @@ KEYWORDS = frozenset(
     {
         "mission", "vehicle", "const", "place", "capacity", "final", "transition", "priority",
         "wait", "action", "signal", "include", "assert", "never", "reachable", "bound", "ignore",
+        "always", "eventually", "leadsto", "ltl", "ctl", "require",
+        "not", "and", "or", "true", "false", "deadlock",
     }
 )  # fmt: skip
 
 # Words that start a top-level statement: the parser resynchronises on them after an error.
 STATEMENT_KEYWORDS = frozenset(
-    {"mission", "vehicle", "const", "place", "final", "transition", "include", "assert"}
+    {"mission", "vehicle", "const", "place", "final", "transition", "include", "assert", "require"}
 )
 
 _PUNCTUATION = {
@@ -66,6 +77,15 @@ _PUNCTUATION = {
     "-": Kind.MINUS,
     "->": Kind.ARROW,
     "<=": Kind.LE,
+    "<": Kind.LT,
+    ">=": Kind.GE,
+    ">": Kind.GT,
+    "==": Kind.EQEQ,
+    "!=": Kind.NE,
+    "+": Kind.PLUS,
+    "[": Kind.LBRACKET,
+    "]": Kind.RBRACKET,
+    ".": Kind.DOT,
 }
 
 # One match per token: the white space before it (possessive, so it is never given
@@ -79,7 +99,7 @@ _LINE_TOKENS = re.compile(
       ([^\W\d]\w*\??)                                  # identifier
     | ((?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?)          # number
     | ("(?:[^"\\\n]|\\.)*"?)                           # string (maybe unterminated)
-    | (->|<=|[{}(),=*:/-])                             # punctuation
+    | (->|<=|>=|==|!=|[{}(),=*:/<>+.\[\]-])             # punctuation
     | (\#.*)                                           # comment, to the end of the line
     | (.)                                              # anything else: an error
     )

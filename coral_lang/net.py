@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 from coral_lang.diagnostics import CoralError, Span
+from coral_lang.formula import Formula
 
 
 class PlaceKind(enum.Enum):
@@ -125,23 +126,54 @@ class AssertKind(enum.Enum):
     NEVER = "never"  # never all these places marked together
     REACHABLE = "reachable"  # some reachable marking has at least these tokens
     BOUND = "bound"  # the place never holds more than `bound` tokens
+    LTL = "ltl"  # `formula` (``A φ``) holds on every run, under the runtime's fairness
+    CTL = "ctl"  # the CTL `formula` holds in the initial marking
 
 
 @dataclass(frozen=True)
 class Assertion:
-    """A property written in the mission with ``assert``."""
+    """A property written in the mission with ``assert``.
+
+    ``never``, ``reachable`` and ``bound`` name ``places`` (and a ``bound``); the
+    temporal kinds (``always``, ``eventually``, ``leadsto`` and ``ltl`` compile to
+    `AssertKind.LTL`, ``ctl`` to `AssertKind.CTL`) carry their `formula` and the
+    assertion as written (``text``, in the printer's layout) for reports.
+    """
 
     kind: AssertKind
     places: tuple[tuple[str, int], ...]
     bound: int | None = None
     span: Span | None = None
+    formula: Formula | None = None
+    text: str = ""
+
+    @property
+    def temporal(self) -> bool:
+        """Whether this is an LTL or CTL assertion (decided on the state graph)."""
+        return self.kind in (AssertKind.LTL, AssertKind.CTL)
 
     def describe(self) -> str:
         """The assertion in the mission's own syntax."""
+        if self.temporal:
+            return self.text or f"assert {self.kind.value} {self.formula}"
         body = _token_list(self.places)
         if self.kind is AssertKind.BOUND:
             return f"assert bound {body} <= {self.bound}"
         return f"assert {self.kind.value} {{ {body} }}"
+
+    def canonical(self) -> list[object]:
+        """What `Net.canonical` records: the temporal kinds add the formula's text (so
+        nets without them keep their digests)."""
+        entry: list[object] = [self.kind.value, sorted([p, w] for p, w in self.places), self.bound]
+        if self.formula is not None:
+            entry.append(str(self.formula))
+        return entry
+
+
+def _assertion_order(a: Assertion) -> tuple[str, list[list[str | int]], int, str]:
+    """The order of `Assertion.canonical` entries: by kind, places, bound, formula."""
+    places: list[list[str | int]] = sorted([p, w] for p, w in a.places)
+    return a.kind.value, places, -1 if a.bound is None else a.bound, str(a.formula or "")
 
 
 def _token_list(tokens: Iterable[tuple[str, int]]) -> str:
@@ -336,10 +368,7 @@ class Net:
                 for t in sorted(self.transitions, key=lambda t: t.name)
             ],
             "finals": sorted(sorted([p, w] for p, w in f.tokens) for f in self.finals),
-            "assertions": sorted(
-                [a.kind.value, sorted([p, w] for p, w in a.places), a.bound]
-                for a in self.assertions
-            ),
+            "assertions": [a.canonical() for a in sorted(self.assertions, key=_assertion_order)],
             # Only when present, so nets without requirements keep their digests.
             **({"requirements": sorted(self.requirements)} if self.requirements else {}),
         }

@@ -6,10 +6,30 @@ one run reports every error of a file. The grammar is in ``docs/language.md``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from coral_lang import ast, units
 from coral_lang.diagnostics import Diagnostic, Severity, Span, did_you_mean
 from coral_lang.gcpause import cyclic_gc_paused
 from coral_lang.lexer import KEYWORDS, STATEMENT_KEYWORDS, Kind, Token, tokenize
+from coral_lang.printer import format_expr
+
+_TEMPORAL_KINDS = ("always", "eventually", "ltl", "ctl")
+_ASSERT_KINDS = ("never", "reachable", "bound", *_TEMPORAL_KINDS)
+_PREFIX_OPERATORS = frozenset({"X", "F", "G", "AX", "AF", "AG", "EX", "EF", "EG"})
+_FUNCTIONS = ("in_flight", "fires", "fireable")
+_COMPARISONS = {
+    Kind.LT: "<",
+    Kind.LE: "<=",
+    Kind.EQEQ: "==",
+    Kind.NE: "!=",
+    Kind.GE: ">=",
+    Kind.GT: ">",
+}
+# Tokens that can follow a place name inside a state expression.
+_CONTINUES_TERM = frozenset(
+    {*_COMPARISONS, Kind.STAR, Kind.PLUS, Kind.ARROW, Kind.EQUALS, Kind.DOT}
+)
 
 
 class _SyntaxError(Exception):
@@ -40,6 +60,8 @@ class _Parser:
         # read several times per token, and that dominated parsing of large missions.
         self.tok: Token = tokens[0]
         self.previous: Token = tokens[0]
+        # Where the property expression being parsed stands, for errors ("" outside one).
+        self._context = ""
 
     # -- token helpers ----------------------------------------------------------------
 
@@ -175,13 +197,15 @@ class _Parser:
                 return self.include()
             if word == "assert":
                 return self.assertion()
+            if word == "require":
+                return self.require()
             if token.text in ("wait", "action", "signal", "priority"):
                 raise self.error(
                     f"'{token.text}' must belong to a transition; start one with 'transition NAME'"
                 )
         raise self.error(
-            f"expected a declaration (const, place, final, transition, include, assert), "
-            f"found {token.describe()}"
+            "expected a declaration (const, place, final, transition, include, assert, "
+            f"require), found {token.describe()}"
         )
 
     def const(self) -> ast.Const:
@@ -215,6 +239,7 @@ class _Parser:
             token.kind is not Kind.IDENT
             or token.span.line != number.span.line
             or token.text in KEYWORDS
+            or self._context  # token counts in a property have no unit: 'p*2 U q'
         ):
             return None
         name = token.text
@@ -287,7 +312,7 @@ class _Parser:
         path = self.expect(Kind.STRING, "after 'include' (a file name in double quotes)")
         return ast.Include(path.text, _join(keyword, path))
 
-    def assertion(self) -> ast.AssertDecl:
+    def assertion(self) -> ast.AssertDecl | ast.TemporalAssert:
         keyword = self.advance()
         kind_token = self.tok
         if self.at_keyword("never") or self.at_keyword("reachable"):
@@ -310,10 +335,240 @@ class _Parser:
             return ast.AssertDecl(
                 ast.AssertKind.BOUND, tokens, bound, _join(keyword, self.previous)
             )
+        if kind_token.kind is Kind.IDENT and kind_token.text in _TEMPORAL_KINDS:
+            self.advance()
+            formula = self.expression(f"after 'assert {kind_token.text}'")
+            return ast.TemporalAssert(
+                ast.TemporalKind(kind_token.text), formula, _join(keyword, self.previous)
+            )
+        if self._starts_leadsto():
+            formula = self.expression("after 'assert'")
+            if isinstance(formula, ast.Binary) and formula.op == "leadsto":
+                return ast.TemporalAssert(
+                    ast.TemporalKind.LEADSTO, formula, _join(keyword, self.previous)
+                )
+            raise self.error(
+                f"expected 'leadsto' after 'assert {format_expr(formula)}', found "
+                f"{self.tok.describe()}",
+                None,
+                (
+                    "a state expression alone is no property: write 'assert always P', "
+                    "'assert eventually P' or 'assert P leadsto Q'",
+                ),
+            )
+        hint = ""
+        if kind_token.kind is Kind.IDENT:
+            hint = did_you_mean(kind_token.text, _ASSERT_KINDS)
         raise self.error(
-            f"expected 'never', 'reachable' or 'bound' after 'assert', "
-            f"found {kind_token.describe()}"
+            "expected 'never', 'reachable', 'bound', 'always', 'eventually', 'ltl', 'ctl' "
+            f"or 'P leadsto Q' after 'assert', found {kind_token.describe()}{hint}"
         )
+
+    def _starts_leadsto(self) -> bool:
+        """Whether the tokens after ``assert`` read as the start of ``P leadsto Q``
+        rather than a misspelt assertion kind (``assert sometimes { a }``)."""
+        token = self.tok
+        if token.kind is Kind.LPAREN or token.kind is Kind.INT:
+            return True
+        if token.kind is not Kind.IDENT:
+            return False
+        if token.text in ("not", "true", "false", "deadlock", "final"):
+            return True
+        if token.text in KEYWORDS:
+            return False
+        follow = self.tokens[self.pos + 1]
+        if follow.kind is Kind.IDENT:
+            return follow.text in ("leadsto", "and", "or")
+        return follow.kind in _CONTINUES_TERM or follow.kind is Kind.LPAREN
+
+    def require(self) -> ast.Require:
+        keyword = self.advance()
+        name = self.ident("a requirement, e.g. 'require termination'")
+        return ast.Require(name.text, _join(keyword, name), name.span)
+
+    # -- property expressions (see docs/language.md for the precedence) ---------------------
+
+    def expression(self, context: str) -> ast.Expr:
+        """``implication [ "leadsto" implication ]``."""
+        outer, self._context = self._context, context
+        try:
+            return self._leadsto()
+        finally:
+            self._context = outer
+
+    def _leadsto(self) -> ast.Expr:
+        left = self.implication()
+        if self.at_keyword("leadsto"):
+            op = self.advance()
+            right = self.implication()
+            if self.at_keyword("leadsto"):
+                raise self.error("'leadsto' does not chain: parenthesise one side")
+            return ast.Binary("leadsto", (left, right), _join(left.span, right.span), op.span)
+        return left
+
+    def implication(self, in_brackets: bool = False) -> ast.Expr:
+        """``disjunction [ "->" implication ]`` (right-associative)."""
+        left = self.disjunction(in_brackets)
+        if self.tok.kind is Kind.ARROW:
+            op = self.advance()
+            right = self.implication(in_brackets)
+            return ast.Binary("->", (left, right), _join(left.span, right.span), op.span)
+        return left
+
+    def disjunction(self, in_brackets: bool) -> ast.Expr:
+        return self._chain("or", self.conjunction, in_brackets)
+
+    def conjunction(self, in_brackets: bool) -> ast.Expr:
+        return self._chain("and", self.until, in_brackets)
+
+    def _chain(self, word: str, operand: Callable[[bool], ast.Expr], in_brackets: bool) -> ast.Expr:
+        first = operand(in_brackets)
+        args = [first]
+        op_span = first.span
+        while self.at_keyword(word):
+            token = self.advance()
+            if len(args) == 1:
+                op_span = token.span
+            args.append(operand(in_brackets))
+        if len(args) == 1:
+            return first
+        return ast.Binary(word, tuple(args), _join(first.span, args[-1].span), op_span)
+
+    def until(self, in_brackets: bool) -> ast.Expr:
+        """``unary [ "U" until ]`` (right-associative); inside ``A [ .. ]`` the ``U`` at
+        the bracket's own level separates the two sides instead."""
+        left = self.unary()
+        if not in_brackets and self.at_keyword("U"):
+            op = self.advance()
+            right = self.until(False)
+            return ast.Binary("U", (left, right), _join(left.span, right.span), op.span)
+        return left
+
+    def unary(self) -> ast.Expr:
+        token = self.tok
+        if token.kind is Kind.IDENT:
+            text = token.text
+            if text == "not" or text in _PREFIX_OPERATORS:
+                self.advance()
+                arg = self.unary()
+                return ast.Unary(text, arg, _join(token, arg.span), token.span)
+            if text in ("A", "E"):
+                follow = self.tokens[self.pos + 1]
+                if follow.kind is Kind.IDENT and follow.text in ("X", "F", "G"):
+                    self.advance()
+                    self.advance()
+                    arg = self.unary()
+                    return ast.Unary(
+                        text + follow.text, arg, _join(token, arg.span), _join(token, follow)
+                    )
+                if follow.kind is Kind.LBRACKET:
+                    return self.path_until()
+        return self.primary()
+
+    def path_until(self) -> ast.PathUntil:
+        quantifier = self.advance()
+        self.advance()  # '['
+        left = self.implication(in_brackets=True)
+        if not self.at_keyword("U"):
+            raise self.error(
+                f"expected 'U' in '{quantifier.text} [ P U Q ]', found {self.tok.describe()}"
+            )
+        self.advance()
+        right = self.implication()
+        close = self.expect(Kind.RBRACKET, f"to close '{quantifier.text} [ P U Q'")
+        return ast.PathUntil(quantifier.text, left, right, _join(quantifier, close))
+
+    def primary(self) -> ast.Expr:
+        token = self.tok
+        if token.kind is Kind.LPAREN:
+            self.advance()
+            inner = self.expression(self._context)
+            self.expect(Kind.RPAREN, "to close '('")
+            return inner
+        if token.kind is Kind.IDENT:
+            text = token.text
+            follow = self.tokens[self.pos + 1]
+            if text in ("true", "false", "deadlock") or (
+                text == "final" and follow.kind is not Kind.LBRACE
+            ):
+                self.advance()
+                return ast.Word(text, token.span)
+            if follow.kind is Kind.LPAREN and text not in KEYWORDS:
+                return self.call()
+        if (token.kind is Kind.IDENT and token.text not in KEYWORDS) or token.kind is Kind.INT:
+            return self.comparison()
+        raise self.error(f"expected a state expression {self._context}, found {token.describe()}")
+
+    def call(self) -> ast.Call:
+        name = self.advance()
+        if name.text not in _FUNCTIONS:
+            raise self.error(
+                f"unknown function '{name.text}'{did_you_mean(name.text, _FUNCTIONS)}",
+                name.span,
+                (f"functions: {', '.join(_FUNCTIONS)}",),
+            )
+        self.advance()  # '('
+        refs = [self.transition_ref(name.text)]
+        while self.accept(Kind.COMMA):
+            refs.append(self.transition_ref(name.text))
+        close = self.expect(Kind.RPAREN, f"to close '{name.text}('")
+        return ast.Call(name.text, tuple(refs), _join(name, close))
+
+    def transition_ref(self, function: str) -> ast.TransitionRef:
+        first = self.ident(f"a transition name in '{function}(...)'")
+        text = first.text
+        if self.accept(Kind.DOT):
+            reply = self.ident(f"a reply kind after '{text}.'")
+            text += "." + reply.text
+        return ast.TransitionRef(text, _join(first, self.previous))
+
+    def comparison(self) -> ast.Expr:
+        left = self.sum()
+        op = self.tok
+        if op.kind in _COMPARISONS:
+            self.advance()
+            right = self.sum()
+            return ast.Comparison(left, _COMPARISONS[op.kind], right, _join(left.span, right.span))
+        if op.kind is Kind.EQUALS:
+            raise self.error("'=' declares; write '==' to compare")
+        if len(left.terms) == 1 and isinstance(left.terms[0], ast.TokenRef):
+            return left.terms[0]
+        raise self.error(
+            f"expected a comparison ('<', '<=', '==', '!=', '>=', '>') after "
+            f"'{format_expr(left)}', found {op.describe()}",
+            None,
+            ("a number or a sum is no property: compare it, e.g. 'p + q <= 3'",),
+        )
+
+    def sum(self) -> ast.Sum:
+        terms = [self.term()]
+        while self.accept(Kind.PLUS):
+            terms.append(self.term())
+        return ast.Sum(tuple(terms), _join(terms[0].span, terms[-1].span))
+
+    def term(self) -> ast.TokenRef | ast.Number:
+        token = self.tok
+        if token.kind is Kind.INT:
+            self.advance()
+            return ast.Number(int(token.text), None, token.span)
+        if token.kind is Kind.FLOAT or token.kind is Kind.MINUS:
+            raise self.error(
+                f"token counts are whole numbers of at least 0, found {token.describe()}"
+            )
+        ref = self.token_ref()
+        if self.tok.kind is Kind.DOT and self.tokens[self.pos + 1].kind is Kind.IDENT:
+            suffix = self.tokens[self.pos + 1]
+            name = f"{ref.place}.{suffix.text}"
+            if suffix.text == "pending":
+                hint = f"write 'in_flight({ref.place})': its command awaits a reply"
+            elif suffix.text == "free":
+                hint = f"compare '{ref.place}' with its capacity instead"
+            else:
+                hint = f"a reply is an event: write 'fires({name})' or 'fireable({name})'"
+            raise self.error(
+                f"'{name}' is not a place a property can read; {hint}", _join(ref.span, suffix)
+            )
+        return ref
 
     def transition(self) -> ast.TransitionDecl:
         keyword = self.advance()

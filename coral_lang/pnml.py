@@ -15,7 +15,9 @@ What survives a round trip ``parse_pnml(to_pnml(net))``: places, transitions, ar
 their weights, initial markings, labels (stripped of surrounding white space) and every
 name. Mission-only data (place and transition kinds, capacities, commands, replies,
 priorities, resources, spans, final markings, assertions, vehicle, sources) travels in
-``<toolspecific tool="coral" version="1">`` blocks that other tools ignore.
+``<toolspecific tool="coral" version="1">`` blocks that other tools ignore. Temporal
+assertions (``always``, ``eventually``, ``leadsto``, ``ltl``, ``ctl``) are not
+exported: PNML has no syntax for their formulas.
 """
 
 from __future__ import annotations
@@ -679,9 +681,16 @@ class _Reader:
             if child.tag == "final":
                 finals.append(FinalMarking(self.tokens(child), self.span(child)))
             elif child.tag == "assertion":
+                kind = self.enum(child, "kind", AssertKind, AssertKind.NEVER)
+                if kind in (AssertKind.LTL, AssertKind.CTL):
+                    raise self.error(
+                        child,
+                        f"coral <assertion> of kind '{kind.value}' has no formula: "
+                        "temporal assertions are not carried in PNML",
+                    )
                 assertions.append(
                     Assertion(
-                        kind=self.enum(child, "kind", AssertKind, AssertKind.NEVER),
+                        kind=kind,
                         places=self.tokens(child),
                         bound=self.optional_int(child, "bound"),
                         span=self.span(child),
@@ -992,6 +1001,8 @@ def _net_block(net: Net, ident: str) -> list[str]:
         body = _span_line(final.span) + _token_lines(final.tokens)
         lines += ["<final>", *("  " + line for line in body), "</final>"]
     for assertion in net.assertions:
+        if assertion.temporal:
+            continue  # PNML has no formula syntax: temporal assertions are not exported
         head = _element("assertion", {"kind": assertion.kind.value, "bound": assertion.bound})
         body = _span_line(assertion.span) + _token_lines(assertion.places)
         lines += [head[:-2] + ">", *("  " + line for line in body), "</assertion>"]

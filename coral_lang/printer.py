@@ -35,6 +35,10 @@ def format_declaration(declaration: ast.Declaration) -> list[str]:
         return [f"final {format_tokens(declaration.tokens)}"]
     if isinstance(declaration, ast.Include):
         return [f"include {format_string(declaration.path)}"]
+    if isinstance(declaration, ast.TemporalAssert):
+        return [format_temporal(declaration)]
+    if isinstance(declaration, ast.Require):
+        return [f"require {declaration.name}"]
     if isinstance(declaration, ast.AssertDecl):
         if declaration.kind is ast.AssertKind.BOUND:
             assert declaration.bound is not None
@@ -46,6 +50,59 @@ def format_declaration(declaration: ast.Declaration) -> list[str]:
             return [f"assert bound {target} <= {format_value(declaration.bound)}"]
         return [f"assert {declaration.kind.value} {format_tokens(declaration.tokens)}"]
     return _transition(declaration)
+
+
+def format_temporal(declaration: ast.TemporalAssert) -> str:
+    """``assert always P``, ``assert P leadsto Q``, ``assert ctl AG EF P``..."""
+    formula = declaration.formula
+    if declaration.kind is ast.TemporalKind.LEADSTO:
+        return f"assert {format_expr(formula)}"
+    return f"assert {declaration.kind.value} {format_expr(formula)}"
+
+
+# Binding strength of each operator: a child binding more loosely than its position
+# needs is parenthesised, so printing then parsing gives back the same tree.
+_LEADSTO, _IMPLIES, _OR, _AND, _UNTIL, _UNARY, _ATOM = range(7)
+_BINARY_LEVEL = {"leadsto": _LEADSTO, "->": _IMPLIES, "or": _OR, "and": _AND, "U": _UNTIL}
+
+
+def format_expr(expr: ast.Expr | ast.Sum, level: int = _LEADSTO) -> str:
+    """A property expression in canonical layout, parenthesised only where needed
+    (and around every ``U`` below the top, which reads better)."""
+    if isinstance(expr, ast.Sum):
+        return " + ".join(
+            format_token(t) if isinstance(t, ast.TokenRef) else format_value(t) for t in expr.terms
+        )
+    own, text = _expr(expr)
+    if own < level or (own == _UNTIL and level > _LEADSTO):
+        return f"({text})"
+    return text
+
+
+def _expr(expr: ast.Expr) -> tuple[int, str]:
+    if isinstance(expr, ast.TokenRef):
+        return _ATOM, format_token(expr)
+    if isinstance(expr, ast.Comparison):
+        return _ATOM, f"{format_expr(expr.left)} {expr.op} {format_expr(expr.right)}"
+    if isinstance(expr, ast.Word):
+        return _ATOM, expr.word
+    if isinstance(expr, ast.Call):
+        names = ", ".join(t.name for t in expr.transitions)
+        return _ATOM, f"{expr.function}({names})"
+    if isinstance(expr, ast.PathUntil):
+        left = format_expr(expr.left, _IMPLIES)
+        right = format_expr(expr.right, _IMPLIES)
+        return _ATOM, f"{expr.quantifier} [ {left} U {right} ]"
+    if isinstance(expr, ast.Unary):
+        return _UNARY, f"{expr.op} {format_expr(expr.arg, _UNARY)}"
+    own = _BINARY_LEVEL[expr.op]
+    if expr.op in ("and", "or"):
+        parts = [format_expr(a, own + 1) for a in expr.args]
+    elif expr.op == "leadsto":
+        parts = [format_expr(a, _IMPLIES) for a in expr.args]
+    else:  # '->' and 'U' group to the right
+        parts = [format_expr(expr.args[0], own + 1), format_expr(expr.args[1], own)]
+    return own, f" {expr.op} ".join(parts)
 
 
 def _place(place: ast.PlaceDecl) -> str:

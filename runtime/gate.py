@@ -62,7 +62,9 @@ def approve_mission(
     certificate_data = make_certificate(report)
     if certificate_data["verdict"] != "proven":
         failing = ", ".join(
-            f"{p.key} {p.verdict.value}" for p in report.properties if p.verdict.value != "proven"
+            f"{p.key} {p.verdict.value}"
+            for p in report.properties
+            if p.required and p.verdict.value != "proven"
         )
         raise CertificateError(
             f"{path}: verification did not pass ({failing}); run 'coral-check verify {path}' "

@@ -1,10 +1,18 @@
 """The example missions: the pool mission compiles and behaves; each faulty one shows
-its one fault (checked here with the plain reference explorer)."""
+its one fault (checked here with the plain reference explorer, and for the termination
+faults with the verifier's lassos at their source lines)."""
 
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
+from pathlib import Path
 
+import pytest
+
+from analysis.certificate import check_certificate, make_certificate, write_certificate
+from analysis.report import Step, Verdict
+from analysis.verify import VerifyOptions, verify
 from coral_lang.compiler import compile_file, compile_mission
 from coral_lang.net import Net, PlaceKind
 from tests.analysis.reference import explore_reference
@@ -117,3 +125,68 @@ def test_faulty_dead_transition_never_fires() -> None:
     fired = {t for m in result.states for t, tr in enumerate(net.transitions) if net.enabled(m, tr)}
     assert net.transition_index("record_dock") not in fired
     assert any(not net.is_final(m) for m in result.dead)
+
+
+# -- termination (issue 11): verified means cannot get stuck, cannot spin, ends properly --
+
+
+def _lines(steps: Sequence[Step]) -> list[int]:
+    return [s.span.line for s in steps if s.span is not None]
+
+
+def _replays_as_a_lasso(net: Net, trace: Sequence[Step], loop: Sequence[Step]) -> bool:
+    marking = net.initial_marking()
+    for step in trace:
+        marking = net.fire(marking, net.transition(step.transition))
+    entry = marking
+    for step in loop:
+        transition = net.transition(step.transition)
+        if not net.enabled(marking, transition):
+            return False
+        marking = net.fire(marking, transition)
+    return marking == entry and bool(loop)
+
+
+@pytest.mark.parametrize(
+    ("name", "key", "trace_lines", "loop_lines"),
+    [
+        # DEPTH refused, then ping and pong hand the token back and forth forever
+        ("livelock.coral", "no_engine_cycle", [19, 21], [27, 31]),
+        # DEPTH? times out, retry sends it again, forever; the mission requires termination
+        ("retry_forever.coral", "terminates", [20, 22], [24, 26, 28]),
+    ],
+)
+def test_faulty_non_termination_is_caught_with_a_lasso_at_its_lines(
+    name: str, key: str, trace_lines: list[int], loop_lines: list[int]
+) -> None:
+    net = compile_mission(FAULTY / name)
+    report = verify(net, VerifyOptions(structural=False))
+    assert report.property("deadlock").verdict is Verdict.PROVEN  # no deadlock to find
+    result = report.property(key)
+    assert result.verdict is Verdict.VIOLATED and result.required
+    assert result.evidence is not None
+    assert _lines(result.evidence.trace) == trace_lines
+    assert _lines(result.evidence.loop) == loop_lines
+    for step in (*result.evidence.trace, *result.evidence.loop):
+        assert step.span is not None and step.span.file.endswith(name)
+    assert _replays_as_a_lasso(net, result.evidence.trace, result.evidence.loop)
+    assert report.verdict is Verdict.VIOLATED and report.exit_code() == 1
+
+
+def test_pool_mission_proves_termination_and_its_certificate_is_accepted(
+    tmp_path: Path,
+) -> None:
+    net = compile_mission(POOL)
+    report = verify(net, VerifyOptions(structural=False))
+    assert report.verdict is Verdict.PROVEN
+    for key in ("no_engine_cycle", "final_always_reachable", "terminates"):
+        assert report.property(key).verdict is Verdict.PROVEN, key
+    path = tmp_path / "pool.cert.json"
+    write_certificate(make_certificate(report), path)
+    assert check_certificate(net, path).net_digest == net.digest()
+
+
+def test_the_faulty_readme_lists_every_faulty_mission() -> None:
+    listed = (FAULTY / "README.md").read_text()
+    for path in sorted(FAULTY.glob("*.coral")):
+        assert f"`{path.name}`" in listed, path.name

@@ -85,7 +85,7 @@ def test_clean_mission_exits_0_with_verdicts_and_summary(
     assert main([POOL]) == 0
     captured = capsys.readouterr()
     assert "net 'pool_mission'  sha256:" in captured.out
-    assert re.search(r"^PROVEN +: 9 proven, 0 violated, 0 inconclusive$", captured.out, re.M)
+    assert re.search(r"^PROVEN +: 12 proven, 0 violated, 0 inconclusive$", captured.out, re.M)
     assert captured.out.rstrip().endswith("pool_mission.coral: proven, 0 warnings")
     assert captured.err == ""
 

@@ -152,9 +152,9 @@ def test_the_page_is_self_contained(tmp_path: Path) -> None:
 def test_verdicts_drawing_invariants_and_figures_of_the_pool_mission(tmp_path: Path) -> None:
     dom = parse(_report(tmp_path, POOL, code=0).read_text())
     rows = dom.find("table", "verdicts").find_all("tr", "prop")
-    assert len(rows) == 9
-    assert [row.find("span", "badge").text for row in rows] == ["proven"] * 9
-    assert "assert never { on_site, docking_started }" in rows[6].text
+    assert len(rows) == 12
+    assert [row.find("span", "badge").text for row in rows] == ["proven"] * 12
+    assert "assert never { on_site, docking_started }" in rows[9].text
     figure = dom.find("figure", "net-figure")
     assert len(figure.find_all("g", "place")) == 58
     assert len(figure.find_all("g", "transition")) == 79
@@ -166,8 +166,7 @@ def test_verdicts_drawing_invariants_and_figures_of_the_pool_mission(tmp_path: P
 
 def test_each_step_is_listed_with_its_source_and_marking_without_script(tmp_path: Path) -> None:
     dom = parse(_report(tmp_path, DEADLOCK, code=1).read_text())
-    (player,) = dom.find_all("section", "cx")
-    assert player.attrs["id"] == "f0-cx-deadlock"
+    (player,) = [p for p in dom.find_all("section", "cx") if p.attrs["id"] == "f0-cx-deadlock"]
     steps = player.find("ol", "steps").find_all("li")
     assert [li.attrs["data-step"] for li in steps] == ["0", "1", "2", "3", "4", "5"]
     assert "initial marking" in steps[0].text and "{ start }" in steps[0].text
@@ -201,7 +200,8 @@ def test_mission_text_is_escaped(tmp_path: Path) -> None:
     assert "<script>alert" not in page and "<b>bold</b>" not in page
     assert "&lt;script&gt;alert(&#x27;x&#x27;)&lt;/script&gt; &amp; &lt;b&gt;bold&lt;/b&gt;" in page
     assert "a&lt;b&amp;c&gt;.coral" in page and "a<b&c>" not in page
-    assert page.count("<script") == 2  # the trace's data and the player
+    # each counterexample's data (deadlock, final_always_reachable, terminates), the player
+    assert page.count("<script") == 4
     assert (
         _script_json({"x": "</script><b>&"})
         == '{"x":"\\u003c/script\\u003e\\u003cb\\u003e\\u0026"}'
@@ -272,7 +272,7 @@ def _dom_after_script(chromium: str, tmp_path: Path, url: str) -> Element:
 def test_browser_renders_the_table_and_the_drawing(chromium: str, tmp_path: Path) -> None:
     page = _report(tmp_path, POOL, code=0)
     dom = _dom_after_script(chromium, tmp_path, page.as_uri())
-    assert len(dom.find("table", "verdicts").find_all("tr", "prop")) == 9
+    assert len(dom.find("table", "verdicts").find_all("tr", "prop")) == 12
     svg = dom.find("figure", "net-figure").find("svg", "net")
     assert len(svg.find_all("g", "place")) == 58
 

@@ -64,7 +64,8 @@ def test_summary_lines_and_the_footer() -> None:
     assert summary_line(unread, lint_only=False) == "gone.coral: not checked: no such file"
     text = render_run([deadlock, unread], lint_only=False)
     assert text.endswith("\n\n2 files: 1 violated, 1 unreadable\n")
-    assert text.count("VIOLATED") == 2  # the deadlock line and the report's last line
+    # the deadlock line, final_always_reachable's line and the report's last line
+    assert text.count("VIOLATED") == 3
 
 
 def test_quiet_keeps_only_problems() -> None:

@@ -54,9 +54,101 @@ def token_sets(draw: st.DrawFn, places: list[str], min_size: int = 0) -> tuple[a
     )
 
 
+_CMP = ("<", "<=", "==", "!=", ">=", ">")
+
+
+@st.composite
+def sums(draw: st.DrawFn, places: list[str]) -> ast.Sum:
+    """``p + q*2`` (places only: a number goes on the other side)."""
+    chosen = draw(st.lists(st.sampled_from(places), min_size=1, max_size=3))
+    return ast.Sum(
+        tuple(
+            ast.TokenRef(q, draw(st.one_of(st.none(), st.integers(1, 3).map(ast.Number))))
+            for q in chosen
+        )
+    )
+
+
+@st.composite
+def state_atoms(
+    draw: st.DrawFn, places: list[str], transitions: list[str], commands: list[str], finals: bool
+) -> ast.Expr:
+    """A state atom naming only what the mission declares."""
+    options: list[st.SearchStrategy[ast.Expr]] = [
+        st.builds(ast.TokenRef, st.sampled_from(places)),
+        st.builds(
+            ast.Comparison,
+            sums(places),
+            st.sampled_from(_CMP),
+            st.integers(0, 4).map(lambda k: ast.Sum((ast.Number(k),))),
+        ),
+        st.builds(ast.Comparison, sums(places), st.sampled_from(_CMP), sums(places)),
+        st.sampled_from(["true", "false", "deadlock"] + (["final"] if finals else [])).map(
+            ast.Word
+        ),
+    ]
+    if transitions:
+        refs = st.lists(st.sampled_from(transitions), min_size=1, max_size=2).map(
+            lambda names: tuple(ast.TransitionRef(n) for n in names)
+        )
+        options.append(st.builds(ast.Call, st.just("fireable"), refs))
+    if commands:
+        refs = st.lists(st.sampled_from(commands), min_size=1, max_size=2).map(
+            lambda names: tuple(ast.TransitionRef(n) for n in names)
+        )
+        options.append(st.builds(ast.Call, st.just("in_flight"), refs))
+    return draw(st.one_of(options))
+
+
+def expressions(atoms: st.SearchStrategy[ast.Expr], logic: str) -> st.SearchStrategy[ast.Expr]:
+    """Property expressions of ``logic`` (``state``, ``ltl`` or ``ctl``) over ``atoms``."""
+    unary = ["not"] + {
+        "state": [],
+        "ltl": ["X", "F", "G"],
+        "ctl": ["AX", "AF", "AG", "EX", "EF", "EG"],
+    }[logic]
+    binary = ["->"] + (["U"] if logic == "ltl" else [])
+
+    def extend(inner: st.SearchStrategy[ast.Expr]) -> st.SearchStrategy[ast.Expr]:
+        options: list[st.SearchStrategy[ast.Expr]] = [
+            st.builds(ast.Unary, st.sampled_from(unary), inner),
+            st.builds(
+                ast.Binary,
+                st.sampled_from(["and", "or"]),
+                st.lists(inner, min_size=2, max_size=3).map(tuple),
+            ),
+            st.builds(ast.Binary, st.sampled_from(binary), st.tuples(inner, inner)),
+        ]
+        if logic == "ctl":
+            options.append(st.builds(ast.PathUntil, st.sampled_from(["A", "E"]), inner, inner))
+        return st.one_of(options)
+
+    return st.recursive(atoms, extend, max_leaves=6)
+
+
+@st.composite
+def temporal_asserts(
+    draw: st.DrawFn, places: list[str], transitions: list[str], commands: list[str], finals: bool
+) -> ast.TemporalAssert:
+    """A valid ``assert always/eventually/leadsto/ltl/ctl``."""
+    atoms = state_atoms(places, transitions, commands, finals)
+    kind = draw(st.sampled_from(list(ast.TemporalKind)))
+    if kind is ast.TemporalKind.LEADSTO:
+        state = expressions(atoms, "state")
+        return ast.TemporalAssert(kind, ast.Binary("leadsto", (draw(state), draw(state))))
+    logic = {ast.TemporalKind.LTL: "ltl", ast.TemporalKind.CTL: "ctl"}.get(kind, "state")
+    if logic == "ltl" and transitions:
+        refs = st.lists(st.sampled_from(transitions), min_size=1, max_size=2).map(
+            lambda names: tuple(ast.TransitionRef(n) for n in names)
+        )
+        atoms = st.one_of(atoms, st.builds(ast.Call, st.just("fires"), refs))
+    return ast.TemporalAssert(kind, draw(expressions(atoms, logic)))
+
+
 @st.composite
 def missions(draw: st.DrawFn) -> ast.Mission:
-    """A valid mission for ROMEO: places, constants, finals, transitions, assertions."""
+    """A valid mission for ROMEO: places, constants, finals, transitions, assertions
+    (temporal ones too), requirements."""
     names = draw(st.lists(identifiers, min_size=2, max_size=12, unique=True))
     n_places = draw(st.integers(1, len(names) - 1))
     places, others = names[:n_places], names[n_places:]
@@ -83,13 +175,19 @@ def missions(draw: st.DrawFn) -> ast.Mission:
         decls.append(ast.Places(tuple(ast.PlaceDecl(p) for p in places[index:])))
     if draw(st.booleans()):
         decls.append(ast.Const("LABEL", ast.String(draw(st.text(max_size=10)))))
+    commands: list[str] = []
+    replies: list[str] = []
     for transition_name in others:
         action = draw(st.one_of(st.none(), actions(places)))
+        if action is not None:
+            commands.append(transition_name)
+            replies += [f"{transition_name}.{r.reply}" for r in action.replies]
         wait = draw(token_sets(places, min_size=1))
         signal = draw(token_sets(places))
         priority = draw(st.one_of(st.none(), st.integers(-3, 3).map(ast.Number)))
         decls.append(ast.TransitionDecl(transition_name, priority, wait, action, signal))
-    for _ in range(draw(st.integers(0, 2))):
+    n_finals = draw(st.integers(0, 2))
+    for _ in range(n_finals):
         decls.append(ast.Final(draw(token_sets(places, min_size=1))))
     if draw(st.booleans()):
         decls.append(ast.AssertDecl(ast.AssertKind.NEVER, draw(token_sets(places, min_size=1))))
@@ -98,4 +196,8 @@ def missions(draw: st.DrawFn) -> ast.Mission:
         decls.append(
             ast.AssertDecl(ast.AssertKind.BOUND, target, ast.Number(draw(st.integers(0, 5))))
         )
+    for _ in range(draw(st.integers(0, 2))):
+        decls.append(draw(temporal_asserts(places, [*others, *replies], commands, n_finals > 0)))
+    if draw(st.booleans()):
+        decls.append(ast.Require("termination"))
     return ast.Mission(draw(identifiers), "ROMEO", tuple(decls))

@@ -12,6 +12,12 @@ from coral_lang.compiler import compile_source
 
 HEADER = "mission m\nvehicle ROMEO\n"
 PLACES = "place a = 1, b, c\n"
+# Two transitions for the properties to name: 'go' sends a command, 'stop' does not.
+TEMPORAL = (
+    "place d\n"
+    "transition go wait { a } action { ROMEO(DEPTH, z = 2.0) -> { ack: b, error: c } }\n"
+    "transition stop wait { b } signal { d }\n"
+)
 
 
 def _first(text: str) -> str:
@@ -57,7 +63,8 @@ TABLE: list[tuple[str, str]] = [
     ),
     (
         HEADER + "assert sometimes { a }\n",
-        "3:8: expected 'never', 'reachable' or 'bound' after 'assert', found 'sometimes' [CORAL001]",
+        "3:8: expected 'never', 'reachable', 'bound', 'always', 'eventually', 'ltl', 'ctl' or "
+        "'P leadsto Q' after 'assert', found 'sometimes' [CORAL001]",
     ),
     (
         HEADER + "place p\ntransition t wait { p } action { ROMEO(DEPTH, 2.0) }\n",
@@ -197,6 +204,129 @@ TABLE: list[tuple[str, str]] = [
         + PLACES
         + "transition t wait { a } action { ROMEO(DEPTH, z = 2.0) -> { ack: b, ack: c, error: c } }\n",
         "4:69: reply 'ack' is mapped twice [CORAL108]",
+    ),
+    # temporal assertions (HEADER + PLACES + TEMPORAL, assertion on line 7)
+    (
+        HEADER + PLACES + TEMPORAL + "assert alwyas b\n",
+        "7:8: expected 'never', 'reachable', 'bound', 'always', 'eventually', 'ltl', 'ctl' or "
+        "'P leadsto Q' after 'assert', found 'alwyas' (did you mean 'always'?) [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert b and c\n",
+        "8:1: expected 'leadsto' after 'assert b and c', found end of file [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert always b = 1\n",
+        "7:17: '=' declares; write '==' to compare [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert always b + c\n",
+        "8:1: expected a comparison ('<', '<=', '==', '!=', '>=', '>') after 'b + c', "
+        "found end of file [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert always\n",
+        "8:1: expected a state expression after 'assert always', found end of file [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert ctl E [ b c ]\n",
+        "7:18: expected 'U' in 'E [ P U Q ]', found 'c' [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert always (b or c\n",
+        "8:1: expected ')' to close '(', found end of file [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert ltl b leadsto c leadsto a\n",
+        "7:24: 'leadsto' does not chain: parenthesise one side [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert eventually fired(go)\n",
+        "7:19: unknown function 'fired' (did you mean 'fires'?) [CORAL001]",
+    ),
+    (
+        HEADER + "require\n",
+        "4:1: expected a requirement, e.g. 'require termination', found end of file [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert go.pending leadsto b\n",
+        "7:8: 'go.pending' is not a place a property can read; write 'in_flight(go)': its "
+        "command awaits a reply [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert always go.ack -> b\n",
+        "7:15: 'go.ack' is not a place a property can read; a reply is an event: write "
+        "'fires(go.ack)' or 'fireable(go.ack)' [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert always dd\n",
+        "7:15: unknown place 'dd' (did you mean 'd'?) [CORAL002]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert eventually fires(goo)\n",
+        "7:25: unknown transition 'goo' (did you mean 'go'?) [CORAL002]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert always not fires(go.akc)\n",
+        "7:25: transition 'go' has no reply 'akc' (did you mean 'ack'?) [CORAL002]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert always F b\n",
+        "7:15: 'F' is a temporal operator, but 'assert always' takes a state expression [CORAL008]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert b leadsto F c\n",
+        "7:18: 'F' is a temporal operator, but the two sides of 'leadsto' are state "
+        "expressions [CORAL008]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert ltl G AF b\n",
+        "7:14: 'AF' is a CTL path quantifier; an LTL formula already speaks of every run "
+        "[CORAL008]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert ctl AG F b\n",
+        "7:15: in CTL, 'F' needs a path quantifier: write 'AF' (on every run) or 'EF' "
+        "(on some run) [CORAL008]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert ctl b U c\n",
+        "7:14: in CTL, 'U' needs a path quantifier: write 'A [ P U Q ]' (on every run) or "
+        "'E [ P U Q ]' (on some run) [CORAL008]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert ctl AG not fires(go)\n",
+        "7:19: 'fires' is an event of a run, which CTL cannot see: CTL speaks of markings "
+        "[CORAL008]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert ctl AG (b leadsto c)\n",
+        "7:18: 'leadsto' is LTL: in CTL write 'AG (P -> AF Q)' [CORAL008]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert in_flight(stop) leadsto d\n",
+        "7:18: transition 'stop' sends no command, so nothing of it is ever in flight [CORAL008]",
+    ),
+    (
+        HEADER + PLACES + TEMPORAL + "assert in_flight(go.ack) leadsto d\n",
+        "7:18: in_flight takes the transition that sends a command, 'in_flight(go)', not one "
+        "of its replies [CORAL008]",
+    ),
+    (
+        HEADER + PLACES + "const K = 1\nassert always K\n",
+        "5:15: 'K' is a constant, not a place: compare a place with it, e.g. 'p >= K' [CORAL008]",
+    ),
+    (
+        HEADER + PLACES + "assert eventually final\n",
+        "4:19: 'final' means a declared final marking, and this mission declares none [CORAL008]",
+    ),
+    (
+        HEADER + PLACES + "assert always a + 1 <= b\n",
+        "4:15: a comparison of places with places cannot also add numbers [CORAL008]",
+    ),
+    (
+        HEADER + "require terminaton\n",
+        "3:9: unknown requirement 'terminaton' (did you mean 'termination'?) [CORAL009]",
     ),
 ]
 

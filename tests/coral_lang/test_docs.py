@@ -23,7 +23,7 @@ def test_every_coral_example_in_the_language_doc_compiles(snippet: str) -> None:
 
 def test_every_code_emitted_by_the_front_end_is_registered_and_documented() -> None:
     emitted: set[str] = set()
-    for module in ("lexer.py", "parser.py", "compiler.py", "loading.py"):
+    for module in ("lexer.py", "parser.py", "compiler.py", "loading.py", "properties.py"):
         emitted |= set(re.findall(r'"(CORAL\d{3})"', (REPO / "coral_lang" / module).read_text()))
     assert emitted <= set(CODES), emitted - set(CODES)
     documented = set(re.findall(r"^\| (CORAL\d{3}) \|", LANGUAGE, re.M))

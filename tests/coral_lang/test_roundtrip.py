@@ -51,7 +51,11 @@ def test_arbitrary_text_gives_diagnostics_not_exceptions(text: str) -> None:
 
 
 _ALPHABET = st.sampled_from(
-    [*list('{}(),=*:->?#"\n ab_1.9'), "wait", "place", "ROMEO(", "transition"]
+    [
+        *list('{}(),=*:->?#"\n ab_1.9[]+<>!'),
+        *("wait", "place", "ROMEO(", "transition", "assert ", "always ", "leadsto ", " U "),
+        *("ltl G ", "ctl AG ", "E [", "in_flight(", "fires(", "final", "not ", "require "),
+    ]
 )
 
 

@@ -1,0 +1,241 @@
+"""``coral-check query``: Model Checking Contest examinations on a P/T net.
+
+::
+
+    coral-check query MODEL.pnml QUERIES.xml [QUERIES.xml ...]
+    coral-check query MODEL.pnml --examination NAME [--examination NAME ...]
+    coral-check query MODEL_DIR --examination CTLFireability     (MCC layout)
+
+Prints one MCC line per formula, ``FORMULA <id> TRUE|FALSE|<n> TECHNIQUES <words>`` or
+``FORMULA <id> CANNOT_COMPUTE``; ``--format json`` prints one document instead, with
+the answer, technique, seconds and witness or counterexample trace of every formula.
+A global examination (ReachabilityDeadlock, QuasiLiveness, Liveness, OneSafe,
+StableMarking) prints one line whose id is the examination's name, as MCC tools do.
+
+A folder as MODEL is the MCC layout: ``MODEL/model.pnml`` with ``MODEL/<NAME>.xml``
+beside it; with a ``.pnml`` file, ``--examination NAME`` of a query examination looks
+for ``<NAME>.xml`` or ``<stem>.<NAME>.xml`` in the model's folder.
+
+Exit codes: 0 every formula answered, 3 some could not be computed (a budget ran out),
+2 bad usage or input (a missing file, bad XML or PNML, an unknown place).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from analysis.outcome import EXIT_INCONCLUSIVE, EXIT_OK, EXIT_USAGE
+
+__all__ = ["build_query_parser", "query_main"]
+
+QUERY_EXIT_CODES_HELP = (
+    "exit codes: 0 every formula answered, 3 some formula CANNOT_COMPUTE (a budget ran "
+    "out), 2 bad usage or unreadable input."
+)
+
+
+def build_query_parser() -> argparse.ArgumentParser:
+    """The parser for ``coral-check query``."""
+    from analysis.examinations import (
+        DEFAULT_MAX_EDGES,
+        DEFAULT_MAX_PRODUCT_EDGES,
+        DEFAULT_MAX_STATES,
+        EXAMINATIONS,
+    )
+
+    parser = argparse.ArgumentParser(
+        prog="coral-check query",
+        description="Answer Model Checking Contest queries on a P/T net: the formulas of "
+        "MCC property files (Reachability, CTL, LTL, UpperBounds) and the global "
+        "examinations. Prints one 'FORMULA <id> <answer> TECHNIQUES ...' line per formula "
+        "(CANNOT_COMPUTE when a budget ran out; answers are exact or absent).",
+        epilog=QUERY_EXIT_CODES_HELP,
+    )
+    parser.add_argument(
+        "model", metavar="MODEL", help="PNML file, or an MCC folder holding model.pnml"
+    )
+    parser.add_argument(
+        "queries", nargs="*", metavar="QUERIES.xml", help="MCC property file(s) to answer"
+    )
+    parser.add_argument(
+        "--examination",
+        action="append",
+        default=[],
+        choices=EXAMINATIONS,
+        metavar="NAME",
+        help="an MCC examination (repeatable): " + ", ".join(EXAMINATIONS),
+    )
+    parser.add_argument(
+        "--format", choices=("text", "json"), default="text", help="output (default text)"
+    )
+    parser.add_argument("-o", "--output", metavar="OUT", help="write here, not to stdout")
+    parser.add_argument(
+        "--max-states",
+        type=_positive_int,
+        default=DEFAULT_MAX_STATES,
+        metavar="N",
+        help=f"state budget of the search (default {DEFAULT_MAX_STATES})",
+    )
+    parser.add_argument(
+        "--time-limit",
+        type=_positive_float,
+        default=600.0,
+        metavar="SECONDS",
+        help="time for the whole run (default 600)",
+    )
+    parser.add_argument(
+        "--max-edges",
+        type=_positive_int,
+        default=DEFAULT_MAX_EDGES,
+        metavar="N",
+        help=f"edges of the reachability graph (CTL, LTL, Liveness; default {DEFAULT_MAX_EDGES})",
+    )
+    parser.add_argument(
+        "--max-product-edges",
+        type=_positive_int,
+        default=DEFAULT_MAX_PRODUCT_EDGES,
+        metavar="N",
+        help=f"edges of one LTL product (default {DEFAULT_MAX_PRODUCT_EDGES})",
+    )
+    return parser
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: '{text}'") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError("must be at least 1")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: '{text}'") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError("must be a finite number above 0")
+    return value
+
+
+def _error(message: str) -> None:
+    print(f"coral-check query: error: {message}", file=sys.stderr)
+
+
+class _BadInput(Exception):
+    """Input that cannot be used; the message says why."""
+
+
+def _model_path(model: str) -> Path:
+    path = Path(model)
+    if path.is_dir():
+        inner = path / "model.pnml"
+        if not inner.is_file():
+            raise _BadInput(f"'{model}' is a folder without model.pnml")
+        return inner
+    if not path.exists():
+        raise _BadInput(f"cannot read '{model}': no such file")
+    return path
+
+
+def _examination_file(model: Path, name: str) -> Path:
+    """``<NAME>.xml`` (MCC layout) or ``<stem>.<NAME>.xml`` beside the model."""
+    for candidate in (model.parent / f"{name}.xml", model.parent / f"{model.stem}.{name}.xml"):
+        if candidate.is_file():
+            return candidate
+    raise _BadInput(
+        f"no {name}.xml beside '{model}' (looked for {name}.xml and {model.stem}.{name}.xml);"
+        " pass the query file itself"
+    )
+
+
+def query_main(argv: Sequence[str]) -> int:
+    """Run ``coral-check query``; returns the exit code."""
+    try:
+        args = build_query_parser().parse_args(list(argv))
+    except SystemExit as exc:
+        return EXIT_OK if exc.code == 0 else EXIT_USAGE
+    if not args.queries and not args.examination:
+        _error("nothing to do: give query files or --examination NAME")
+        return EXIT_USAGE
+    if args.output and Path(args.output).is_dir():
+        _error(f"cannot write '{args.output}': it is a directory")
+        return EXIT_USAGE
+    try:
+        document, lines, complete = _run(args)
+    except _BadInput as exc:
+        _error(str(exc))
+        return EXIT_USAGE
+    text = json.dumps(document, indent=2) + "\n" if args.format == "json" else lines
+    if args.output:
+        try:
+            Path(args.output).write_text(text, encoding="utf-8")
+        except OSError as exc:
+            _error(f"cannot write '{args.output}': {exc.strerror}")
+            return EXIT_USAGE
+    else:
+        sys.stdout.write(text)
+    return EXIT_OK if complete else EXIT_INCONCLUSIVE
+
+
+def _run(args: argparse.Namespace) -> tuple[dict[str, Any], str, bool]:
+    from analysis.examinations import GLOBAL_EXAMINATIONS, Answer, Budget, QuerySession
+    from analysis.mccxml import MccProperty, MccXmlError, read_properties
+    from coral_lang.diagnostics import PnmlError
+    from coral_lang.pnml import read_pnml
+
+    started = time.perf_counter()
+    model = _model_path(args.model)
+    try:
+        net = read_pnml(model)
+    except PnmlError as exc:
+        raise _BadInput(str(exc)) from None
+    files = [Path(q) for q in args.queries]
+    globals_: list[str] = []
+    for name in dict.fromkeys(args.examination):
+        if name in GLOBAL_EXAMINATIONS:
+            globals_.append(name)
+        else:
+            files.append(_examination_file(model, name))
+    props: list[MccProperty] = []
+    for file in files:
+        if not file.is_file():
+            why = "it is a directory" if file.is_dir() else "no such file"
+            raise _BadInput(f"cannot read '{file}': {why}")
+        try:
+            props.extend(read_properties(file, net))
+        except MccXmlError as exc:
+            raise _BadInput(str(exc)) from None
+    budget = Budget(
+        max_states=args.max_states,
+        time_limit=args.time_limit,
+        max_edges=args.max_edges,
+        max_product_edges=args.max_product_edges,
+    )
+    session = QuerySession(net, budget)
+    answers: list[Answer] = session.check(props)
+    answers += [session.check_global(name) for name in globals_]
+    lines = "".join(a.mcc_line() + "\n" for a in answers)
+    space = session.space
+    document: dict[str, Any] = {
+        "tool": "coral-check query",
+        "model": net.name,
+        "file": str(model),
+        "queries": [str(f) for f in files],
+        "states": None if space is None else space.states,
+        "complete": None if space is None else space.complete,
+        "shared_seconds": round(session.shared_seconds, 6),
+        "seconds": round(time.perf_counter() - started, 6),
+        "answered": sum(a.computed for a in answers),
+        "cannot_compute": sum(not a.computed for a in answers),
+        "results": [a.to_dict() for a in answers],
+    }
+    return document, lines, all(a.computed for a in answers)
