@@ -2,7 +2,7 @@
 
 A profile (YAML) lists the commands a vehicle accepts, their parameters (name, type,
 unit, range), the reply kinds each can produce, the vehicle resources each drives, a
-nominal duration, and for space-trap queries the tracking criterion. The schema is
+nominal duration, and for tracking (space-trap) queries the tracking criterion. The schema is
 documented in ``docs/profiles.md``; ROMEO's profile (Table 1 of the paper) is bundled.
 """
 
@@ -24,6 +24,8 @@ CommandKind = Literal["task", "query", "action"]
 PARAM_TYPES: tuple[str, ...] = ("float", "int", "string")
 COMMAND_KINDS: tuple[str, ...] = ("task", "query", "action")
 TIME_OUT = "time_out"
+#: The signals a ``space_trap`` may track (their meaning: ``docs/profiles.md``).
+SPACE_TRAP_SIGNALS: tuple[str, ...] = ("depth", "heading", "xy", "xypsi", "docked")
 
 
 @dataclass(frozen=True)
@@ -234,8 +236,6 @@ def _command(
             raise doc.error(f"{path}.params", f"'{TIME_OUT}' must have a time unit such as s")
         if "timeout" not in replies:
             raise doc.error(f"{path}.replies", "a query must be able to reply 'timeout'")
-        if trap is None:
-            raise doc.error(path, "a query must declare its 'space_trap' criterion")
     elif trap is not None:
         raise doc.error(f"{path}.space_trap", "only queries (kind: query) have a space_trap")
     return CommandSpec(
@@ -331,8 +331,15 @@ def _space_trap(doc: YamlDocument, node: Plain, path: str) -> SpaceTrap:
     window = _number(doc, spec["window_s"], f"{path}.window_s")
     if window <= 0:
         raise doc.error(f"{path}.window_s", "window_s must be > 0")
+    signal = _string(doc, spec["signal"], f"{path}.signal")
+    if signal not in SPACE_TRAP_SIGNALS:
+        raise doc.error(
+            f"{path}.signal",
+            f"unknown space-trap signal '{signal}'{did_you_mean(signal, SPACE_TRAP_SIGNALS)}; "
+            f"known signals: {', '.join(SPACE_TRAP_SIGNALS)}",
+        )
     return SpaceTrap(
-        signal=_string(doc, spec["signal"], f"{path}.signal"),
+        signal=signal,
         order=order_value,
         eps=eps,
         window_s=window,

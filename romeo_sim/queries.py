@@ -29,13 +29,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from coral_lang.profile import SpaceTrap
+from coral_lang.profile import SPACE_TRAP_SIGNALS, SpaceTrap
 from romeo_sim.dynamics import wrap_angle
 from romeo_sim.navigation import Navigation
 
 __all__ = ["MEASURES", "SIGNALS", "Dock", "SpaceTrapQuery", "make_evaluator"]
 
-SIGNALS: tuple[str, ...] = ("depth", "heading", "xy", "xypsi", "docked")
+#: The profile loader refuses any other signal; the two lists are one.
+SIGNALS: tuple[str, ...] = SPACE_TRAP_SIGNALS
 #: How status lines name each signal's derivative-0 error, and its unit.
 MEASURES: dict[str, tuple[str, str]] = {
     "depth": ("depth error", "m"),

@@ -419,7 +419,7 @@ class Vehicle:
 
     def _start_query(self, cid: int, spec: CommandSpec, values: dict[str, float]) -> None:
         trap = spec.space_trap
-        assert trap is not None  # the profile loader insists on it for queries
+        assert trap is not None  # _check_profile refuses a query without one
         evaluate = make_evaluator(trap, values, self._heading_eps)
         self._queries.append(
             SpaceTrapQuery(
@@ -658,6 +658,13 @@ class Vehicle:
                     path,
                     f"the simulated vehicle cannot carry out '{spec.name}' "
                     f"(it knows {', '.join(SUPPORTED_COMMANDS)})",
+                )
+            if spec.kind == "query" and spec.space_trap is None:
+                raise VehicleConfigError(
+                    profile.file,
+                    path,
+                    f"query '{spec.name}' declares no space_trap: the simulated vehicle "
+                    "answers a query only by its tracking criterion",
                 )
             if spec.space_trap is not None:
                 try:

@@ -15,11 +15,13 @@ from analysis.report import Step, Verdict
 from analysis.verify import VerifyOptions, verify
 from coral_lang.compiler import compile_file, compile_mission
 from coral_lang.net import Net, PlaceKind
+from coral_lang.profile import load_profile
 from tests.analysis.reference import explore_reference
 from tests.conftest import EXAMPLES
 
 POOL = EXAMPLES / "pool_mission" / "pool_mission.coral"
 FAULTY = EXAMPLES / "faulty"
+SURVEY = EXAMPLES / "survey_auv" / "survey.coral"
 
 
 def _conflicts(net: Net, marking: tuple[int, ...]) -> list[tuple[str, str]]:
@@ -190,3 +192,19 @@ def test_the_faulty_readme_lists_every_faulty_mission() -> None:
     listed = (FAULTY / "README.md").read_text()
     for path in sorted(FAULTY.glob("*.coral")):
         assert f"`{path.name}`" in listed, path.name
+
+
+def test_survey_auv_mission_verifies_clean_against_its_profile(tmp_path: Path) -> None:
+    """Issue 12: a mission for another vehicle (MINNOW, with queries that have no
+    tracking criterion) maps every reply and proves every property, termination too."""
+    minnow = load_profile(EXAMPLES / "profiles" / "minnow.yaml")
+    net = compile_mission(SURVEY, [minnow])
+    sent = {t.command.name for t in net.transitions if t.command is not None}
+    assert sent == set(minnow.command_names)
+    report = verify(net, VerifyOptions(structural=False))
+    assert report.verdict is Verdict.PROVEN and report.exit_code() == 0
+    assert all(p.verdict is Verdict.PROVEN for p in report.properties)
+    assert report.property("terminates").verdict is Verdict.PROVEN
+    path = tmp_path / "survey.cert.json"
+    write_certificate(make_certificate(report), path)
+    assert check_certificate(net, path).net_digest == net.digest()

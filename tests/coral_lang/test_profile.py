@@ -7,7 +7,13 @@ from pathlib import Path
 import pytest
 
 from coral_lang.diagnostics import ProfileError
-from coral_lang.profile import load_bundled_profile, load_profile, parse_profile
+from coral_lang.profile import (
+    SPACE_TRAP_SIGNALS,
+    load_bundled_profile,
+    load_profile,
+    parse_profile,
+)
+from tests.conftest import EXAMPLES
 
 TABLE_1 = [
     "DEPTH",
@@ -164,3 +170,66 @@ def test_the_fast_yaml_parser_gives_the_same_values_and_positions(
     slow = yamlsource.load_yaml(text, "romeo.yaml")
     assert fast.data == slow.data and fast.positions == slow.positions
     assert len(fast.positions) > 100
+
+
+QUERY = """
+vehicle: BOT
+resources: [gnss]
+commands:
+  GPS_FIX?:
+    kind: query
+    params:
+      - {name: time_out, type: float, unit: s, min: 10, max: 600}
+    replies: [done, timeout, error]
+    resources: [gnss]
+"""
+
+
+def test_query_without_a_tracking_criterion_loads() -> None:
+    fix = parse_profile(QUERY, "bot.yaml").command("GPS_FIX?")
+    assert fix is not None and fix.kind == "query" and fix.space_trap is None
+    assert fix.replies == ("done", "timeout", "error")
+
+
+def test_query_without_a_space_trap_still_needs_its_time_out() -> None:
+    with pytest.raises(ProfileError, match="must take a 'time_out'") as caught:
+        parse_profile(QUERY.replace("name: time_out", "name: wait"), "bot.yaml")
+    assert caught.value.path == "commands.GPS_FIX?.params"
+
+
+def test_unknown_space_trap_signal_is_refused_with_the_known_ones() -> None:
+    text = QUERY + "    space_trap: {signal: banana, order: 0, eps: [1.0], window_s: 1}\n"
+    with pytest.raises(ProfileError) as caught:
+        parse_profile(text, "bot.yaml")
+    assert caught.value.path == "commands.GPS_FIX?.space_trap.signal"
+    message = str(caught.value)
+    assert message.startswith("bot.yaml:11:")
+    assert "unknown space-trap signal 'banana'" in message
+    assert "known signals: " + ", ".join(SPACE_TRAP_SIGNALS) in message
+    with pytest.raises(ProfileError, match="did you mean 'depth'"):
+        parse_profile(text.replace("banana", "depht"), "bot.yaml")
+
+
+def test_every_bundled_space_trap_signal_is_a_known_one() -> None:
+    for command in load_bundled_profile("ROMEO").commands:
+        if command.space_trap is not None:
+            assert command.space_trap.signal in SPACE_TRAP_SIGNALS
+
+
+@pytest.mark.parametrize(
+    ("file", "vehicle", "untracked_query"),
+    [
+        ("minnow.yaml", "MINNOW", "GPS_FIX?"),
+        ("glider.yaml", "GLIDER", "SURFACE_COMMS?"),
+        ("usv.yaml", "USV", "GPS_FIX?"),
+    ],
+)
+def test_example_vehicle_profiles_load(file: str, vehicle: str, untracked_query: str) -> None:
+    profile = load_profile(EXAMPLES / "profiles" / file)
+    assert profile.name == vehicle
+    query = profile.command(untracked_query)
+    assert query is not None and query.kind == "query" and query.space_trap is None
+    assert {"timeout", "error"} <= set(query.replies)
+    for command in profile.commands:
+        if command.kind == "query":
+            assert command.param("time_out") is not None, command.name

@@ -7,6 +7,7 @@ import math
 
 import pytest
 
+from coral_lang.diagnostics import ProfileError
 from coral_lang.profile import load_bundled_profile, parse_profile
 from romeo_sim.config import VehicleConfigError, default_config
 from romeo_sim.scenario import run_pool_mission
@@ -279,13 +280,28 @@ def test_profile_with_a_command_the_vehicle_lacks_is_refused() -> None:
         Vehicle(profile=profile)
 
 
-def test_profile_with_an_unknown_space_trap_signal_is_refused() -> None:
+def test_profile_with_an_unknown_space_trap_signal_is_refused_when_it_loads() -> None:
+    with pytest.raises(ProfileError, match="unknown space-trap signal 'altitude'"):
+        parse_profile(
+            "vehicle: ROMEO\nresources: [depth]\ncommands:\n"
+            "  DEPTH?:\n    kind: query\n    replies: [done, timeout]\n"
+            "    params: [{name: time_out, type: float, unit: s}]\n"
+            "    space_trap: {signal: altitude, order: 0, eps: [0.1], window_s: 1}\n",
+            "odd.yaml",
+        )
+
+
+def test_query_without_a_space_trap_is_refused_naming_the_command() -> None:
+    """The schema allows a query without a tracking criterion; the simulator, which
+    answers queries only by one, says which command lacks it instead of crashing."""
     profile = parse_profile(
         "vehicle: ROMEO\nresources: [depth]\ncommands:\n"
         "  DEPTH?:\n    kind: query\n    replies: [done, timeout]\n"
-        "    params: [{name: time_out, type: float, unit: s}]\n"
-        "    space_trap: {signal: altitude, order: 0, eps: [0.1], window_s: 1}\n",
+        "    params: [{name: time_out, type: float, unit: s}]\n",
         "odd.yaml",
     )
-    with pytest.raises(VehicleConfigError, match="unknown space-trap signal 'altitude'"):
+    with pytest.raises(
+        VehicleConfigError,
+        match=r"odd.yaml: commands.DEPTH\?: query 'DEPTH\?' declares no space_trap",
+    ):
         Vehicle(profile=profile)
