@@ -49,7 +49,7 @@ def _explored(name: str) -> StateSpace:
 
 
 def test_the_oracle_has_the_documented_small_models() -> None:
-    assert MODELS, "shared/conformance is missing: clone the repository with ../shared beside it"
+    assert MODELS, "the vendored conformance data (tests/data/mcc) is missing"
     assert len(MODELS) == 40
 
 

@@ -197,9 +197,7 @@ def test_siphon_trap_claims_never_contradict_the_mcc_oracle(model: dict[str, Any
 def test_weighted_mcc_model_with_the_property_still_deadlocks() -> None:
     """PGCD is weighted: every minimal siphon holds a marked trap, yet it deadlocks."""
     model = next((m for m in _oracle_models() if m["model"] == "PGCD-PT-D02N005"), None)
-    assert model is not None, (
-        "shared/conformance is missing: clone the repository with ../shared beside it"
-    )
+    assert model is not None, "the vendored conformance data (tests/data/mcc) is missing"
     check = siphon_trap_check(read_pnml(Path(CONFORMANCE) / model["pnml"]))
     assert model["deadlock"] is True
     assert check.holds is True and not check.proves_deadlock_free

@@ -121,9 +121,7 @@ def test_timeout_gives_unknown() -> None:
     # An Unknown needs z3 to really run out of time: a 1 ms limit on a query that takes
     # it seconds (DoubleExponent-PT-003 deadlock), so the outcome does not depend on load.
     path = CONFORMANCE / "pnml" / "DoubleExponent-PT-003.pnml"
-    assert path.exists(), (
-        "shared/conformance is missing: clone the repository with ../shared beside it"
-    )
+    assert path.exists(), "the vendored conformance data (tests/data/mcc) is missing"
     net: Net = read_pnml(path)
     result = check_unreachable(net, deadlocks(), timeout_ms=1, use_traps=False)
     assert isinstance(result, Unknown) and "z3" in result.reason
@@ -225,9 +223,7 @@ def test_deadlock_proofs_never_contradict_the_mcc_oracle(model: dict[str, Any]) 
 def test_deadlock_freedom_is_proven_on_known_deadlock_free_models(name: str, method: str) -> None:
     """Regression: these proofs hold today; losing one means the encoding got weaker."""
     model = next((m for m in _oracle_models() if m["model"] == name), None)
-    assert model is not None, (
-        "shared/conformance is missing: clone the repository with ../shared beside it"
-    )
+    assert model is not None, "the vendored conformance data (tests/data/mcc) is missing"
     assert model["deadlock"] is False
     net: Net = read_pnml(Path(CONFORMANCE) / model["pnml"])
     result = check_unreachable(net, deadlocks(), timeout_ms=10_000, time_limit=30)

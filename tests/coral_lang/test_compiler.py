@@ -15,7 +15,7 @@ from tests.analysis.reference import explore_reference
 
 SKETCH = re.search(
     r"```coral\n(.*?)```",
-    (Path(__file__).resolve().parents[3] / "shared" / "language-sketch.md").read_text(),
+    (Path(__file__).resolve().parents[1] / "data" / "language-sketch.md").read_text(),
     re.S,
 )
 
