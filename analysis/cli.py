@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from analysis.argtypes import non_negative_float, positive_float, positive_int
 from analysis.lint import DEFAULT_LINK_RTT_S, LintOptions, lint
 from analysis.outcome import (
     EXIT_ERRORS,
@@ -163,7 +164,7 @@ def _add_profile_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--link-rtt",
-        type=_non_negative_float,
+        type=non_negative_float,
         default=DEFAULT_LINK_RTT_S,
         metavar="SECONDS",
         help="worst round trip of the link to the vehicle, for the query time-out rule "
@@ -203,14 +204,14 @@ def _add_color_option(parser: argparse.ArgumentParser) -> None:
 def _add_search_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--max-states",
-        type=_positive_int,
+        type=positive_int,
         default=2_000_000,
         metavar="N",
         help="state budget of the explicit search (default 2000000)",
     )
     parser.add_argument(
         "--time-limit",
-        type=_positive_float,
+        type=positive_float,
         default=120.0,
         metavar="SECONDS",
         help="time limit of the explicit search (default 120)",
@@ -228,7 +229,7 @@ def _add_search_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--progress", action="store_true", help="show search progress on stderr")
     parser.add_argument(
         "--max-deadlocks",
-        type=_positive_int,
+        type=positive_int,
         default=20,
         metavar="N",
         help="list at most N dead non-final markings, each with its own shortest trace; "
@@ -236,46 +237,12 @@ def _add_search_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--max-edges",
-        type=_positive_int,
+        type=positive_int,
         default=8_000_000,
         metavar="N",
         help="edge budget of the reachability graph that the termination properties "
         "need, 12 bytes an edge; past it they are inconclusive (default 8000000)",
     )
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: '{text}'") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError("must be at least 1")
-    return value
-
-
-def _number(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: '{text}'") from None
-    if value != value or value in (float("inf"), float("-inf")):
-        raise argparse.ArgumentTypeError(f"not a finite number: '{text}'")
-    return value
-
-
-def _positive_float(text: str) -> float:
-    value = _number(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError("must be more than 0")
-    return value
-
-
-def _non_negative_float(text: str) -> float:
-    value = _number(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError("must be 0 or more")
-    return value
 
 
 # -- entry point --------------------------------------------------------------------------

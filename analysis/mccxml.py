@@ -31,7 +31,6 @@ from typing import Any
 from xml.sax import SAXParseException
 
 from defusedxml import DefusedXmlException
-from defusedxml.expatreader import DefusedExpatParser
 
 from coral_lang.diagnostics import CoralError, did_you_mean
 from coral_lang.formula import (
@@ -54,6 +53,7 @@ from coral_lang.formula import (
     Until,
 )
 from coral_lang.net import Net
+from coral_lang.safexml import SafeExpatParser
 
 __all__ = [
     "MCC_NAMESPACE",
@@ -149,26 +149,6 @@ class _Builder:
         self._stack[-1].chunks.append(content)
 
 
-class _Parser(DefusedExpatParser):  # type: ignore[misc]
-    """defusedxml's expat driver with its element events wired to `_Builder`."""
-
-    def __init__(self, builder: _Builder) -> None:
-        super().__init__(
-            namespaceHandling=1, forbid_dtd=True, forbid_entities=True, forbid_external=True
-        )
-        self._builder = builder
-
-    def reset(self) -> None:
-        super().reset()
-        expat = self._parser
-        expat.buffer_text = True
-        expat.namespace_prefixes = False
-        expat.StartElementHandler = self._builder.start
-        expat.EndElementHandler = self._builder.end
-        expat.CharacterDataHandler = self._builder.data
-        self._builder.expat = expat
-
-
 def read_properties(path: str | os.PathLike[str], net: Net | None = None) -> list[MccProperty]:
     """The properties of an MCC query file, in file order.
 
@@ -199,7 +179,7 @@ def parse_properties(
 
 def _parse_xml(data: bytes | str, file: str) -> _Element:
     builder = _Builder()
-    parser = _Parser(builder)
+    parser = SafeExpatParser(builder)
     try:
         parser.feed(data)
         parser.close()

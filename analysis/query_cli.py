@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from analysis.argtypes import positive_float, positive_int
 from analysis.outcome import EXIT_INCONCLUSIVE, EXIT_OK, EXIT_USAGE
 
 __all__ = ["build_query_parser", "query_main"]
@@ -77,53 +78,33 @@ def build_query_parser() -> argparse.ArgumentParser:
     parser.add_argument("-o", "--output", metavar="OUT", help="write here, not to stdout")
     parser.add_argument(
         "--max-states",
-        type=_positive_int,
+        type=positive_int,
         default=DEFAULT_MAX_STATES,
         metavar="N",
         help=f"state budget of the search (default {DEFAULT_MAX_STATES})",
     )
     parser.add_argument(
         "--time-limit",
-        type=_positive_float,
+        type=positive_float,
         default=600.0,
         metavar="SECONDS",
         help="time for the whole run (default 600)",
     )
     parser.add_argument(
         "--max-edges",
-        type=_positive_int,
+        type=positive_int,
         default=DEFAULT_MAX_EDGES,
         metavar="N",
         help=f"edges of the reachability graph (CTL, LTL, Liveness; default {DEFAULT_MAX_EDGES})",
     )
     parser.add_argument(
         "--max-product-edges",
-        type=_positive_int,
+        type=positive_int,
         default=DEFAULT_MAX_PRODUCT_EDGES,
         metavar="N",
         help=f"edges of one LTL product (default {DEFAULT_MAX_PRODUCT_EDGES})",
     )
     return parser
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: '{text}'") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError("must be at least 1")
-    return value
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: '{text}'") from None
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError("must be a finite number above 0")
-    return value
 
 
 def _error(message: str) -> None:

@@ -31,7 +31,6 @@ from xml.sax import SAXParseException
 from xml.sax.saxutils import escape, quoteattr
 
 from defusedxml import DefusedXmlException, DTDForbidden, EntitiesForbidden
-from defusedxml.expatreader import DefusedExpatParser
 
 from coral_lang.diagnostics import PnmlError, Span, did_you_mean
 from coral_lang.net import (
@@ -47,6 +46,7 @@ from coral_lang.net import (
     TransitionKind,
     Value,
 )
+from coral_lang.safexml import SafeExpatParser
 
 __all__ = [
     "CORAL_TOOL",
@@ -157,32 +157,6 @@ class _TreeBuilder:
             self._stack[-1].chunks.append(content)
 
 
-class _SafeParser(DefusedExpatParser):  # type: ignore[misc]
-    """defusedxml's expat driver (no DTD, entities or external references), with the
-    element events wired straight to `_TreeBuilder`.
-
-    The SAX layer in between would build attribute objects and locators per element
-    and roughly double the parse time of a large net; the defusing handlers that
-    defusedxml installs in `reset` are kept untouched.
-    """
-
-    def __init__(self, builder: _TreeBuilder) -> None:
-        super().__init__(
-            namespaceHandling=1, forbid_dtd=True, forbid_entities=True, forbid_external=True
-        )
-        self._builder = builder
-
-    def reset(self) -> None:
-        super().reset()
-        expat = self._parser
-        expat.buffer_text = True
-        expat.namespace_prefixes = False  # names as "uri local", never "uri local prefix"
-        expat.StartElementHandler = self._builder.start
-        expat.EndElementHandler = self._builder.end
-        expat.CharacterDataHandler = self._builder.data
-        self._builder.expat = expat
-
-
 def _is_coral_block(element: _Element) -> bool:
     return (
         element.attrs.get("tool") == CORAL_TOOL
@@ -239,7 +213,7 @@ def parse_pnml(data: bytes | str, file: str = "<pnml>", *, net_id: str | None = 
 
 def _parse_xml(data: bytes | str, file: str) -> _Element:
     builder = _TreeBuilder()
-    parser = _SafeParser(builder)
+    parser = SafeExpatParser(builder)
     try:
         parser.feed(data)
         parser.close()

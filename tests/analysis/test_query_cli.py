@@ -169,7 +169,7 @@ def test_bad_inputs_exit_2(
         (["query", model, "--examination", "LTLFireability"], "no LTLFireability.xml beside"),
         (["query", str(tmp_path), "--examination", "OneSafe"], "folder without model.pnml"),
         (["query", model, "--examination", "Reversibility"], "invalid choice"),
-        (["query", model, "--examination", "OneSafe", "--time-limit", "0"], "above 0"),
+        (["query", model, "--examination", "OneSafe", "--time-limit", "0"], "more than 0"),
     ]
     for argv, message in cases:
         assert main(argv) == 2, argv
