@@ -89,6 +89,12 @@ GLOBAL_EXAMINATIONS = (
 EXAMINATIONS = QUERY_EXAMINATIONS + GLOBAL_EXAMINATIONS
 
 EXPLICIT = ("EXPLICIT", "STATE_COMPRESSION")
+
+STATE_EQUATION_SECONDS = 60.0
+"""Most seconds the z3 proof of deadlock freedom may take when a search gave up."""
+
+STATE_EQUATION_CELLS = 25_000_000
+"""Largest places x transitions the state equation takes (it builds dense matrices)."""
 """Technique words (the MCC's) of answers read off the explicit state space."""
 
 DEFAULT_MAX_STATES = 5_000_000
@@ -661,11 +667,15 @@ class QuerySession:
 
     def _deadlock(self) -> Answer:
         """The full search first (the fastest explorer, shared with the other
-        examinations); when its budget stops it, a deadlock-preserving stubborn-set
-        search, which often stores far fewer markings."""
+        examinations); when its budget stops it, a z3 proof that no dead marking is
+        reachable (state equation and traps: answers FALSE without exploring), then a
+        deadlock-preserving stubborn-set search, which often stores far fewer markings."""
         space = self.full_space()
         techniques: tuple[str, ...] = EXPLICIT
         if not space.complete and not space.has_deadlock and not self.out_of_time():
+            proof = self._deadlock_free_by_state_equation()
+            if proof is not None:
+                return proof
             if self._reduced is None:
                 start = self.clock()
                 self._reduced = explore(
@@ -683,6 +693,32 @@ class QuerySession:
         if space.complete:
             return Answer("", False, techniques, method="global")
         return self._incomplete(space)
+
+    def _deadlock_free_by_state_equation(self) -> Answer | None:
+        """FALSE when the state equation with trap constraints proves that no dead
+        marking is reachable; ``None`` when it cannot (a solution of the equation is
+        not a deadlock, so it never gives TRUE), the net is too large for its dense
+        matrices, or no time is left."""
+        n_places, n_transitions = len(self.net.places), len(self.net.transitions)
+        if n_places * n_transitions > STATE_EQUATION_CELLS:
+            return None
+        left = self.remaining()
+        limit = STATE_EQUATION_SECONDS if left is None else min(STATE_EQUATION_SECONDS, left)
+        if limit <= 0:
+            return None
+        from analysis import stateeq  # z3 and the invariants: only when a search gave up
+
+        start = self.clock()
+        result = stateeq.check_unreachable(
+            self.net,
+            stateeq.deadlocks(),
+            timeout_ms=max(1, int(limit * 1000)),
+            time_limit=limit,
+        )
+        self.shared_seconds += self.clock() - start
+        if not isinstance(result, stateeq.Proven):
+            return None
+        return Answer("", False, ("STATE_EQUATION",), method="global", reason=result.explain())
 
     def _quasi_liveness(self) -> Answer:
         space = self.full_space()

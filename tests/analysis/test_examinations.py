@@ -4,6 +4,7 @@ that replay on the net, and the global examinations on small nets."""
 from __future__ import annotations
 
 import pytest
+import yaml
 
 from analysis.examinations import Answer, Budget, QuerySession, examination_of
 from analysis.mccxml import MccProperty, PlaceBound
@@ -22,7 +23,9 @@ from coral_lang.formula import (
     Tokens,
 )
 from coral_lang.net import Net
+from coral_lang.pnml import read_pnml
 from tests.analysis.nets import make_net, mutex
+from tests.conftest import CONFORMANCE
 
 
 def prop(ident: str, query: Formula | PlaceBound, file: str = "q.xml") -> MccProperty:
@@ -320,3 +323,36 @@ def test_unknown_names_are_cannot_compute_not_a_crash() -> None:
     assert [a.value for a in answers] == [None, None, True]
     assert answers[0].reason == "cannot check: the net has no place 'nope'"
     assert answers[1].reason == "cannot check: the net has no place 'nada'"
+
+
+SMALL_BUDGET_MODELS = (
+    "Dekker-PT-010",
+    "Peterson-PT-2",
+    "SimpleLoadBal-PT-02",
+    "Philosophers-PT-000005",
+    "DoubleExponent-PT-002",
+    "Eratosthenes-PT-010",
+)
+
+
+@pytest.mark.parametrize("name", SMALL_BUDGET_MODELS)
+def test_deadlock_with_a_search_too_small_is_never_wrong(name: str) -> None:
+    """With 20 markings no search completes: a deadlock-free net may then be proven so by
+    the state equation (FALSE), a deadlock found is TRUE, and nothing else is guessed."""
+    oracle = {
+        m["model"]: m for m in yaml.safe_load((CONFORMANCE / "oracle.yaml").read_text())["models"]
+    }
+    expected = oracle[name]["deadlock"]
+    net = read_pnml(CONFORMANCE / "pnml" / f"{name}.pnml")
+    answer = QuerySession(net, Budget(max_states=20)).check_global("ReachabilityDeadlock")
+    assert answer.value in (expected, None)
+    if answer.value is False:
+        assert answer.techniques == ("STATE_EQUATION",)
+
+
+def test_deadlock_freedom_of_a_large_net_is_proven_without_exploring_it() -> None:
+    """Kanban-PT-00005 has 2.5M markings; 1,000 are explored, z3 proves the rest."""
+    net = read_pnml(CONFORMANCE / "pnml" / "Kanban-PT-00005.pnml")
+    answer = QuerySession(net, Budget(max_states=1_000)).check_global("ReachabilityDeadlock")
+    assert answer.value is False
+    assert answer.mcc_line().endswith("FALSE TECHNIQUES STATE_EQUATION")
