@@ -22,30 +22,38 @@ import numpy as np
 import numpy.typing as npt
 
 from analysis.stategraph import StateGraph
-from coral_lang.net import TransitionKind
+from coral_lang.net import Net, TransitionKind
 
 BoolArray = npt.NDArray[np.bool_]
+IntArray = npt.NDArray[np.int64]
 Group = tuple[BoolArray, BoolArray]
 """``(enabled_at, in_group)``: nodes where the group is enabled, edges it owns."""
 
 
-def engine_transitions(graph: StateGraph) -> list[int]:
-    """Indices of the transitions the engine fires (everything but vehicle replies)."""
-    return [
-        i for i, t in enumerate(graph.space.net.transitions) if t.kind is not TransitionKind.REPLY
-    ]
+def group_of_transition(net: Net) -> IntArray:
+    """The fairness group of each transition of ``net`` (see module): groups ``0 ..
+    E-1`` are the engine transitions in net order, one each; then one group per
+    command, holding its replies, in the order of the command's first reply; ``-1`` for
+    a reply that answers no command (no fairness constraint)."""
+    out = np.full(len(net.transitions), -1, dtype=np.int64)
+    engine = [i for i, tr in enumerate(net.transitions) if tr.kind is not TransitionKind.REPLY]
+    out[engine] = np.arange(len(engine))
+    commands: dict[str, int] = {}
+    for i, tr in enumerate(net.transitions):
+        if tr.kind is TransitionKind.REPLY and tr.reply_to is not None:
+            out[i] = commands.setdefault(tr.reply_to, len(engine) + len(commands))
+    return out
 
 
 def fairness_groups(graph: StateGraph) -> list[Group]:
-    """The weak-fairness groups of the runtime for the net of ``graph`` (see module)."""
-    net = graph.space.net
+    """The weak-fairness groups of the runtime for the net of ``graph`` (see module),
+    in the order of `group_of_transition`."""
+    of = group_of_transition(graph.space.net)
+    edge_group = of[graph.labels]
     groups: list[Group] = []
-    for t in engine_transitions(graph):
-        groups.append((graph.enabled([t]), graph.labels == t))
-    replies: dict[str, list[int]] = {}
-    for i, tr in enumerate(net.transitions):
-        if tr.kind is TransitionKind.REPLY and tr.reply_to is not None:
-            replies.setdefault(tr.reply_to, []).append(i)
-    for members in replies.values():
-        groups.append((graph.enabled(members), np.isin(graph.labels, members)))
+    for g in range(int(of.max(initial=-1)) + 1):
+        in_group: BoolArray = edge_group == g
+        enabled_at = np.zeros(graph.n_states, dtype=np.bool_)
+        enabled_at[graph.sources[in_group]] = True
+        groups.append((enabled_at, in_group))
     return groups

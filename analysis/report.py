@@ -17,9 +17,13 @@ from __future__ import annotations
 import enum
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from coral_lang.diagnostics import Span
 from coral_lang.net import Net, TransitionKind, format_tokens
+
+if TYPE_CHECKING:
+    from analysis.statespace import StateSpace
 
 REPORT_FORMAT_VERSION = 1
 
@@ -87,6 +91,16 @@ def make_trace(net: Net, transitions: Sequence[int], start: int = 1) -> tuple[St
             )
         )
     return tuple(steps)
+
+
+def witness(space: StateSpace, state: int, note: str = "") -> Evidence:
+    """The trace ``space`` found to ``state`` (shortest unless reduced), and its marking."""
+    net = space.net
+    return Evidence(
+        trace=make_trace(net, space.trace_to(state)),
+        marking=net.marking_dict(space.marking(state)),
+        note=note,
+    )
 
 
 @dataclass(frozen=True)

@@ -495,7 +495,7 @@ def _covering_cycle(
         if (members & ~enabled_at).any():
             goal_nodes = members & ~enabled_at
             if not goal_nodes[here]:
-                step = shortest_path(n, s, d, _one(n, here), goal_nodes)
+                step = shortest_path(n, s, d, node_mask(n, here), goal_nodes)
                 assert step is not None
                 cycle += [int(idx[e]) for e in step]
                 here = int(d[step[-1]]) if step else here
@@ -504,7 +504,7 @@ def _covering_cycle(
         assert group_edges.size, "a fair component has an inner edge of every enabled group"
         heads = np.zeros(n, dtype=np.bool_)
         heads[s[group_edges]] = True
-        step = shortest_path(n, s, d, _one(n, here), heads)
+        step = shortest_path(n, s, d, node_mask(n, here), heads)
         assert step is not None
         cycle += [int(idx[e]) for e in step]
         here = int(d[step[-1]]) if step else here
@@ -521,12 +521,13 @@ def _covering_cycle(
         here = int(d[first])
         if here == entry:
             return cycle
-    back = shortest_path(n, s, d, _one(n, here), _one(n, entry))
+    back = shortest_path(n, s, d, node_mask(n, here), node_mask(n, entry))
     assert back is not None
     return cycle + [int(idx[e]) for e in back]
 
 
-def _one(n: int, node: int) -> BoolArray:
+def node_mask(n: int, node: int) -> BoolArray:
+    """A boolean array over ``n`` nodes, true at ``node`` only."""
     out = np.zeros(n, dtype=np.bool_)
     out[node] = True
     return out

@@ -34,8 +34,15 @@ import numpy as np
 import numpy.typing as npt
 
 from analysis.fairness import fairness_groups
-from analysis.report import Evidence, PropertyResult, Verdict, make_trace
-from analysis.stategraph import GraphError, StateGraph, fair_lasso, fair_sccs, shortest_path
+from analysis.report import Evidence, PropertyResult, Verdict, make_trace, witness
+from analysis.stategraph import (
+    GraphError,
+    StateGraph,
+    fair_lasso,
+    fair_sccs,
+    node_mask,
+    shortest_path,
+)
 from analysis.statespace import StateSpace
 from coral_lang import formula as fm
 from coral_lang.net import Assertion, AssertKind, Net
@@ -107,11 +114,7 @@ class _Temporal:
         return self.result(Verdict.INCONCLUSIVE, method, reason)
 
     def trace_to(self, state: int, note: str = "") -> Evidence:
-        return Evidence(
-            trace=make_trace(self.net, self.space.trace_to(state)),
-            marking=self.net.marking_dict(self.space.marking(state)),
-            note=note,
-        )
+        return witness(self.space, state, note)
 
     # -- LTL --------------------------------------------------------------------------
 
@@ -314,7 +317,7 @@ class _Explainer:
         lead = [int(idx[e]) for e in prefix]
         if self.graph.dead[end]:
             return self.evidence(lead, "the path ends in this dead marking (nothing can fire)")
-        lasso = fair_lasso(self.n, src, dst, _one(self.n, end), comp, cyclic)
+        lasso = fair_lasso(self.n, src, dst, node_mask(self.n, end), comp, cyclic)
         assert lasso is not None
         loop = [int(idx[e]) for e in lasso.cycle]
         return Evidence(
@@ -334,12 +337,6 @@ class _Explainer:
             marking=self.net.marking_dict(self.graph.space.marking(end)),
             note=note or ("" if edges else "the initial marking itself shows it"),
         )
-
-
-def _one(n: int, node: int) -> BoolArray:
-    out = np.zeros(n, dtype=np.bool_)
-    out[node] = True
-    return out
 
 
 def _incomplete(space: StateSpace) -> str:

@@ -41,7 +41,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from analysis.report import Evidence, PropertyResult, Verdict, make_trace
+from analysis.report import Evidence, PropertyResult, Verdict, make_trace, witness
 from analysis.statespace import StateSpace, explore
 from coral_lang.net import Net, TransitionKind, format_tokens
 
@@ -152,16 +152,6 @@ def final_states(space: StateSpace) -> BoolArray:
         for state in np.flatnonzero((keys == key).all(axis=1)).tolist():
             out[state] |= space.marking(state) == tuple(final)
     return out
-
-
-def witness(space: StateSpace, state: int, note: str = "") -> Evidence:
-    """The trace `space` found to ``state`` (shortest unless reduced), and its marking."""
-    net = space.net
-    return Evidence(
-        trace=make_trace(net, space.trace_to(state)),
-        marking=net.marking_dict(space.marking(state)),
-        note=note,
-    )
 
 
 @dataclass(frozen=True)
@@ -520,12 +510,13 @@ class FairComponents:
     """
 
     def __init__(self, graph: StateGraph) -> None:
+        from analysis.fairness import group_of_transition
         from analysis.stategraph import nontrivial, scc_labels
 
         self.graph = graph
         net = graph.space.net
         n, src, dst, labels = graph.n_states, graph.sources, graph.targets, graph.labels
-        self.group_of_transition = _groups(net)
+        self.group_of_transition = group_of_transition(net)
         n_groups = int(self.group_of_transition.max(initial=-1)) + 1
         self.edge_group = self.group_of_transition[labels] if labels.size else labels
         comp = scc_labels(n, src, dst)
@@ -560,7 +551,7 @@ class FairComponents:
         group: for each group enabled at every node visited so far and not yet taken,
         walk to a node of the component where it is disabled, or else take one of its
         edges inside the component; then return to ``entry``. Edge indices."""
-        from analysis.stategraph import shortest_path
+        from analysis.stategraph import node_mask, shortest_path
 
         graph = self.graph
         n, src, dst = graph.n_states, graph.sources, graph.targets
@@ -590,7 +581,7 @@ class FairComponents:
             enabled_at[src[edges_of_group]] = True
             elsewhere = members & ~enabled_at
             if elsewhere.any():
-                path = shortest_path(n, s, d, _one(n, here), elsewhere)
+                path = shortest_path(n, s, d, node_mask(n, here), elsewhere)
                 assert path is not None
                 walk(path)
                 continue
@@ -598,7 +589,7 @@ class FairComponents:
             assert own.size, "a fair component has an inner edge of every group enabled on it"
             heads = np.zeros(n, dtype=np.bool_)
             heads[s[own]] = True
-            path = shortest_path(n, s, d, _one(n, here), heads)
+            path = shortest_path(n, s, d, node_mask(n, here), heads)
             assert path is not None
             walk(path)
             walk([int(own[s[own] == here][0])])
@@ -606,27 +597,7 @@ class FairComponents:
             if here == entry:
                 walk(_cycle_through(n, s, d, entry))
             else:
-                back = shortest_path(n, s, d, _one(n, here), _one(n, entry))
+                back = shortest_path(n, s, d, node_mask(n, here), node_mask(n, entry))
                 assert back is not None
                 walk(back)
         return cycle
-
-
-def _groups(net: Net) -> IntArray:
-    """Fairness group of each transition, as in `analysis.fairness`: each engine
-    transition alone, each command's replies together; -1 for a reply that answers no
-    command (no fairness constraint)."""
-    out = np.full(len(net.transitions), -1, dtype=np.int64)
-    engine = [i for i, tr in enumerate(net.transitions) if tr.kind is not TransitionKind.REPLY]
-    out[engine] = np.arange(len(engine))
-    commands: dict[str, int] = {}
-    for i, tr in enumerate(net.transitions):
-        if tr.kind is TransitionKind.REPLY and tr.reply_to is not None:
-            out[i] = commands.setdefault(tr.reply_to, len(engine) + len(commands))
-    return out
-
-
-def _one(n: int, node: int) -> BoolArray:
-    out = np.zeros(n, dtype=np.bool_)
-    out[node] = True
-    return out

@@ -39,6 +39,7 @@ from analysis.report import (
     StateSpaceFigures,
     Verdict,
     make_trace,
+    witness,
 )
 from analysis.stategraph import GraphError, StateGraph, build_graph
 from analysis.statespace import StateSpace, explore
@@ -47,6 +48,7 @@ from analysis.termination import (
     DEFAULT_MAX_EDGES,
     TerminationBudget,
     check_termination,
+    final_rows,
     non_final_dead_states,
 )
 from coral_lang.diagnostics import Span
@@ -266,10 +268,7 @@ class _Checker:
         return f"the state space is incomplete ({self.space.stopped_reason})"
 
     def _witness(self, state: int) -> Evidence:
-        return Evidence(
-            trace=make_trace(self.net, self.space.trace_to(state)),
-            marking=self.net.marking_dict(self.space.marking(state)),
-        )
+        return witness(self.space, state)
 
     def _search_then_prove(
         self,
@@ -507,14 +506,7 @@ class _Checker:
             return []
         title = "a declared final marking is reachable"
         finals = np.array(net.final_markings(), dtype=np.int64)
-
-        def is_final(block: Markings) -> npt.NDArray[np.bool_]:
-            hits: npt.NDArray[np.bool_] = (
-                (block[:, None, :] == finals[None, :, :]).all(axis=2).any(axis=1)
-            )
-            return hits
-
-        hit = self.space.find(is_final)
+        hit = self.space.find(lambda block: final_rows(block, finals))
         if hit is not None:
             reached = format_tokens(self.net.marking_dict(self.space.marking(hit)).items())
             return [
