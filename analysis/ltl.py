@@ -105,7 +105,7 @@ arrays count. The default `DEFAULT_MAX_PRODUCT_EDGES` = 20 million is thus about
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, cast, overload
 
@@ -114,6 +114,7 @@ import numpy.typing as npt
 import spot
 from spot import buddy
 
+from analysis.ctl import NetIndex, StateEvaluator
 from analysis.fairness import Group
 from analysis.stategraph import (
     GraphError,
@@ -133,8 +134,6 @@ from coral_lang.formula import (
     Fires,
     Formula,
     Globally,
-    IntConst,
-    IntExpr,
     Next,
     Not,
     Or,
@@ -166,15 +165,6 @@ node."""
 
 _CHUNK = 1 << 21
 """Most (product node, graph edge, automaton edge) candidates expanded at once."""
-
-_COMPARE: dict[str, Callable[[Any, Any], BoolArray]] = {
-    "<=": np.less_equal,
-    "<": np.less,
-    ">=": np.greater_equal,
-    ">": np.greater,
-    "==": np.equal,
-    "!=": np.not_equal,
-}
 
 
 class LtlError(ValueError):
@@ -428,19 +418,12 @@ def _evaluate_atoms(graph: StateGraph, atoms: list[Formula]) -> list[Column]:
     if compares:
         values = np.zeros((len(compares), graph.n_states), dtype=np.bool_)
 
-        def expr(block: IntArray, e: IntExpr) -> IntArray | int:
-            if isinstance(e, IntConst):
-                return e.value
-            cols = np.asarray([places[p] for p, _ in e.places], dtype=np.int64)
-            weights = np.asarray([w for _, w in e.places], dtype=np.int64)
-            out: IntArray = block[:, cols] @ weights
-            return out
-
+        index = NetIndex(net)
         # One pass over the markings for all comparisons (decoding is the cost).
         for first, block in graph.space.iter_markings():
+            evaluator = StateEvaluator(index, block)
             for i, cmp in enumerate(compares):
-                left, right = expr(block, cmp.left), expr(block, cmp.right)
-                values[i, first : first + block.shape[0]] = _COMPARE[cmp.op](left, right)
+                values[i, first : first + block.shape[0]] = evaluator.atom(cmp)
         on_nodes.update(zip(compares, values, strict=True))
     columns: list[Column] = []
     for atom in atoms:
