@@ -14,6 +14,7 @@ from typing import Any
 
 import networkx as nx
 
+from analysis.stategraph import build_graph
 from analysis.statespace import StateSpace, explore
 from coral_lang.net import Net
 
@@ -49,15 +50,14 @@ def to_networkx(source: StateSpace | Net, *, max_states: int = MAX_GRAPH_STATES)
             f" more than max_states={max_states}"
         )
     net = space.net
-    markings = [tuple(row) for row in space.markings.tolist()]
-    number = {marking: i for i, marking in enumerate(markings)}
+    edges = build_graph(space)
     graph = nx.MultiDiGraph(name=net.name)
     dead = set(space.deadlocks.tolist())
-    for i, marking in enumerate(markings):
-        graph.add_node(i, marking=marking, dead=i in dead)
-    for i, marking in enumerate(markings):
-        for t, transition in enumerate(net.transitions):
-            if net.enabled(marking, transition):
-                successor = number[net.fire(marking, transition)]
-                graph.add_edge(i, successor, key=transition.name, transition=t)
+    for i, marking in enumerate(space.markings.tolist()):
+        graph.add_node(i, marking=tuple(marking), dead=i in dead)
+    names = [t.name for t in net.transitions]
+    for source, t, target in zip(
+        edges.sources.tolist(), edges.labels.tolist(), edges.targets.tolist(), strict=True
+    ):
+        graph.add_edge(source, target, key=names[t], transition=t)
     return graph
