@@ -492,9 +492,14 @@ def _verify_main(argv: list[str]) -> int:
         text = report.render_text(color=color) + "\n"
     if args.certificate:
         from analysis.certificate import make_certificate, write_certificate
+        from coral_lang.mission import Mission
 
+        # The certificate records the profile the mission compiled against: the runtime
+        # refuses it once that profile changes in anything the mission depends on.
+        mission = Mission.from_result(result, Path(args.file), profiles)
+        certificate = make_certificate(report, options, profile_content=mission.profile_content())
         try:
-            write_certificate(make_certificate(report, options), args.certificate)
+            write_certificate(certificate, args.certificate)
         except OSError as exc:
             _error(f"cannot write '{args.certificate}': {exc.strerror}")
             return EXIT_USAGE

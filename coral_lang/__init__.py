@@ -8,6 +8,12 @@ Typical use::
         print(render_all(result.diagnostics, result.sources))
     net = result.net
 
+or, raising `CompileError` instead, a `Mission` that keeps the net with the profile
+it was compiled against (what the runtime and certificates need)::
+
+    mission = load_mission("survey.coral", [load_profile("minnow.yaml")])
+    mission.net, mission.profile
+
 The PNML functions (`read_pnml`, `parse_pnml`, `to_pnml`, `write_pnml`) load their XML
 machinery on first use, so tools that never touch PNML start faster.
 """
@@ -27,6 +33,7 @@ from coral_lang.diagnostics import (
 )
 from coral_lang.dot import to_dot
 from coral_lang.loading import load_net_file
+from coral_lang.mission import Mission, load_mission
 from coral_lang.net import (
     Assertion,
     AssertKind,
@@ -79,6 +86,7 @@ __all__ = [
     "CoralError",
     "Diagnostic",
     "FinalMarking",
+    "Mission",
     "Net",
     "NetError",
     "ParamSpec",
@@ -97,6 +105,7 @@ __all__ = [
     "compile_source",
     "format_mission",
     "load_bundled_profile",
+    "load_mission",
     "load_net_file",
     "load_profile",
     "parse",

@@ -87,6 +87,42 @@ class CommandSpec:
             f"{self.name}({', '.join(p.name for p in self.params)}) -> {' | '.join(self.replies)}"
         )
 
+    def canonical(self) -> dict[str, object]:
+        """What the command means to the vehicle and the runtime, as plain JSON data.
+
+        A certificate records this for every command its mission uses, so that a
+        profile edited after verification is noticed. It keeps everything that can
+        change how a run behaves or what verification assumed (kind, parameters with
+        their types, units and ranges, reply kinds in order, resources, nominal
+        duration, tracking criterion) and leaves out the descriptions and reply
+        meanings, which are for people: rewording them keeps a certificate valid.
+        """
+        trap = self.space_trap
+        return {
+            "kind": self.kind,
+            "params": [
+                {
+                    "name": p.name,
+                    "type": p.type,
+                    "unit": p.unit,
+                    "min": p.minimum,
+                    "max": p.maximum,
+                }
+                for p in self.params
+            ],
+            "replies": list(self.replies),
+            "resources": list(self.resources),
+            "duration_s": self.duration_s,
+            "space_trap": None
+            if trap is None
+            else {
+                "signal": trap.signal,
+                "order": trap.order,
+                "eps": list(trap.eps),
+                "window_s": trap.window_s,
+            },
+        }
+
 
 @dataclass(frozen=True)
 class VehicleProfile:

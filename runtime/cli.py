@@ -1,8 +1,10 @@
 """``coral-run``: run a verified mission against a vehicle, and look at what happened.
 
-``coral-run MISSION [--vehicle HOST:PORT | --sim] [--realtime] [--link PROFILE]``
-compiles the mission, checks its certificate (``--verify`` verifies and issues one if
-there is none), runs it, writes the event logs to ``--out`` and draws the timeline.
+``coral-run MISSION [--vehicle HOST:PORT | --sim] [--realtime] [--link PROFILE]
+[--profile YAML]`` compiles the mission (against the ``--profile`` vehicle profiles
+before the bundled ones, as ``coral-check`` does), checks its certificate, which must
+cover that profile (``--verify`` verifies and issues one if there is none), runs it,
+writes the event logs to ``--out`` and draws the timeline.
 
 ``coral-run --resume LOG [...]`` continues the mission of a controller that died
 (``kill -9`` included), from the last state it committed.
@@ -96,6 +98,13 @@ def build_run_parser() -> argparse.ArgumentParser:
         "YAML file (default: genoa-lisbon with the simulator, none with --vehicle)",
     )
     parser.add_argument(
+        "--profile",
+        action="append",
+        default=[],
+        metavar="YAML",
+        help="vehicle profile to use instead of the bundled one of that name (repeatable)",
+    )
+    parser.add_argument(
         "--certificate",
         type=Path,
         metavar="FILE",
@@ -166,12 +175,16 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _run(options: argparse.Namespace) -> int:
     import secrets
 
+    from coral_lang.profile import load_profile
     from runtime.eventlog import EventLog
     from runtime.gate import approve_mission
     from runtime.keys import load_psk
     from runtime.link import load_link_profile
     from runtime.run import RunConfig, controller_log_path, resume_mission, run_mission
 
+    # First: a bad profile file is bad input (exit 2, its file, line and column), and
+    # should be reported before a key or a log is touched.
+    profiles = [load_profile(path) for path in options.profile]
     simulated = options.vehicle is None
     if options.key_file is None and options.key_hex is None and simulated:
         psk = secrets.token_bytes(32)  # the simulator runs in this process: a fresh key
@@ -195,7 +208,9 @@ def _run(options: argparse.Namespace) -> int:
                 return EXIT_USAGE
             mission_path = recorded
         out_dir = options.resume.parent
-    approved = approve_mission(mission_path, options.certificate, issue=options.verify)
+    approved = approve_mission(
+        mission_path, options.certificate, issue=options.verify, profiles=profiles
+    )
     # The net and the compiler's objects live as long as the run: take them out of the
     # cyclic collector's scans, which otherwise grow with the net (bench/engine.py).
     gc.collect()

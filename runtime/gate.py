@@ -3,10 +3,16 @@
 ``coral-run`` calls `approve_mission` before anything talks to the vehicle. With
 ``issue=True`` a mission without a certificate is verified first, and a certificate is
 written only if every property was proven; the run then uses that certificate.
+
+The mission is compiled against the vehicle profiles the user gave (``--profile``)
+before the bundled ones, and the certificate must cover the profile it compiled
+against: one issued for an older version of the profile, or before certificates
+recorded profiles at all, is refused (`analysis.certificate.check_certificate`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,20 +23,37 @@ from analysis.certificate import (
     make_certificate,
     write_certificate,
 )
-from coral_lang.compiler import compile_mission
+from coral_lang.mission import Mission, load_mission
 from coral_lang.net import Net
+from coral_lang.profile import VehicleProfile
 
-__all__ = ["ApprovedMission", "approve_mission", "default_certificate_path"]
+__all__ = [
+    "ApprovedMission",
+    "approve_mission",
+    "check_mission_certificate",
+    "default_certificate_path",
+]
 
 
 @dataclass(frozen=True)
 class ApprovedMission:
     """A compiled mission and the certificate that lets it run."""
 
-    path: Path
-    net: Net
+    mission: Mission
     approval: CertificateCheck
     issued_now: bool
+
+    @property
+    def path(self) -> Path:
+        """The mission file (an approved mission always comes from one)."""
+        if self.mission.path is None:
+            raise ValueError("an approved mission is compiled from a file")
+        return self.mission.path
+
+    @property
+    def net(self) -> Net:
+        """The compiled net the certificate is for."""
+        return self.mission.net
 
 
 def default_certificate_path(mission: Path) -> Path:
@@ -38,37 +61,65 @@ def default_certificate_path(mission: Path) -> Path:
     return mission.with_name(mission.stem + ".certificate.json")
 
 
-def approve_mission(
-    mission: str | Path, certificate: str | Path | None = None, *, issue: bool = False
-) -> ApprovedMission:
-    """Compile ``mission`` and check its certificate (verifying first if ``issue``).
+def check_mission_certificate(
+    mission: Mission, certificate: str | Path | None = None
+) -> CertificateCheck:
+    """Check ``mission``'s certificate against its net and its vehicle profile.
+
+    ``certificate`` defaults to `default_certificate_path` beside the mission file. The
+    profile content is always passed, so a certificate that does not cover the profile
+    as it is now is refused; this is the check every run (and fuzzing) must use.
 
     Raises:
-        coral_lang.diagnostics.CompileError: the mission does not compile.
-        CertificateError: no passing certificate for this net (and ``issue`` is False, or
-            verification did not prove every property: the message lists what failed).
+        CertificateError: as `analysis.certificate.check_certificate`, or no
+            ``certificate`` given for a mission compiled from text.
+    """
+    if certificate is None:
+        if mission.path is None:
+            raise CertificateError("a mission compiled from text needs a certificate path")
+        certificate = default_certificate_path(mission.path)
+    return check_certificate(mission.net, certificate, profile_content=mission.profile_content())
+
+
+def approve_mission(
+    mission: str | Path,
+    certificate: str | Path | None = None,
+    *,
+    issue: bool = False,
+    profiles: Sequence[VehicleProfile] = (),
+) -> ApprovedMission:
+    """Compile ``mission`` with ``profiles`` and check its certificate (verifying first
+    if ``issue``).
+
+    Raises:
+        coral_lang.diagnostics.CompileError: the mission does not compile (for instance
+            no profile for its vehicle: neither given nor bundled).
+        CertificateError: no passing certificate for this net and profile (and
+            ``issue`` is False, or verification did not prove every property: the
+            message lists what failed).
     """
     path = Path(mission)
-    net = compile_mission(path)
+    compiled = load_mission(path, profiles)
     cert_path = Path(certificate) if certificate is not None else default_certificate_path(path)
     try:
-        return ApprovedMission(path, net, check_certificate(net, cert_path), False)
+        return ApprovedMission(compiled, check_mission_certificate(compiled, cert_path), False)
     except CertificateError:
         if not issue:
             raise
     from analysis.verify import verify  # only when verifying: it loads the solvers
 
-    report = verify(net)
-    certificate_data = make_certificate(report)
+    report = verify(compiled.net)
+    certificate_data = make_certificate(report, profile_content=compiled.profile_content())
     if certificate_data["verdict"] != "proven":
         failing = ", ".join(
             f"{p.key} {p.verdict.value}"
             for p in report.properties
             if p.required and p.verdict.value != "proven"
         )
+        options = "".join(f" --profile {p.file}" for p in profiles)
         raise CertificateError(
-            f"{path}: verification did not pass ({failing}); run 'coral-check verify {path}' "
-            "for the evidence, fix the mission, and run again"
+            f"{path}: verification did not pass ({failing}); run 'coral-check verify "
+            f"{path}{options}' for the evidence, fix the mission, and run again"
         )
     write_certificate(certificate_data, cert_path)
-    return ApprovedMission(path, net, check_certificate(net, cert_path), True)
+    return ApprovedMission(compiled, check_mission_certificate(compiled, cert_path), True)

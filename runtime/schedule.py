@@ -14,7 +14,7 @@ The model of one command, all times in whole milliseconds so that ties are exact
 
 * the command leaves at the engine's step and reaches the vehicle ``up_ms`` later;
 * the vehicle answers after its work time: the command's nominal duration from the
-  vehicle profile (``duration_s``) scaled by ``work_permille`` / 1000, or, for a
+  mission's vehicle profile (``duration_s``; `Timing`) scaled by ``work_permille`` / 1000, or, for a
   ``timeout`` reply, the command's own ``time_out`` (the vehicle says timeout only when
   it has passed);
 * the reply reaches the engine ``down_ms`` later;
@@ -30,13 +30,14 @@ delays and ranks; nothing else is random, so a schedule replays exactly.
 
 from __future__ import annotations
 
+import enum
 import heapq
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from coral_lang.diagnostics import CoralError
 from coral_lang.net import Command, Net
-from coral_lang.profile import TIME_OUT, load_bundled_profile
+from coral_lang.profile import TIME_OUT, VehicleProfile, load_bundled_profile
 from runtime.engine import Engine, Firing, Outcome, SentCommand, StepResult, UnexpectedReply
 
 __all__ = [
@@ -162,26 +163,50 @@ class Schedule:
         return "\n".join(lines) or "every command nominal, no outage"
 
 
+class _Bundled(enum.Enum):
+    """The default of `Timing`'s ``profile``: look the bundled profile up by name."""
+
+    BY_VEHICLE_NAME = "bundled"
+
+
 class Timing:
-    """How long the vehicle works on each command, from the net's vehicle profile.
+    """How long the vehicle works on each command, from the mission's vehicle profile.
 
     The nominal duration is the profile's ``duration_s``; a ``timeout`` reply takes the
-    command's ``time_out`` parameter. Commands of a vehicle without a bundled profile
-    take `DEFAULT_WORK_S`.
+    command's ``time_out`` parameter. Pass the profile the mission was compiled against
+    (``Timing(mission.net, profile=mission.profile)``, `coral_lang.mission.Mission`):
+    that works for any vehicle, including one whose profile was given with
+    ``--profile``. ``profile=None`` (a net without a profile, such as a PNML model)
+    gives every command `DEFAULT_WORK_S`.
+
+    Without ``profile``, the bundled profile of the net's vehicle is looked up by name,
+    as before profiles travelled with the mission; a vehicle without a bundled profile
+    then takes the default for every command.
+
+    Raises:
+        ValueError: ``profile`` is for another vehicle than the net's.
     """
 
-    def __init__(self, net: Net, default_s: float = DEFAULT_WORK_S) -> None:
+    def __init__(
+        self,
+        net: Net,
+        default_s: float = DEFAULT_WORK_S,
+        *,
+        profile: VehicleProfile | _Bundled | None = _Bundled.BY_VEHICLE_NAME,
+    ) -> None:
         self._nominal: dict[str, float] = {}
         self._default = default_s
-        if net.vehicle is not None:
-            try:
-                profile = load_bundled_profile(net.vehicle)
-            except CoralError:
-                return  # not a bundled vehicle: every command takes the default
-            for name in profile.command_names:
-                spec = profile.command(name)
-                if spec is not None:
-                    self._nominal[name] = spec.duration_s
+        if isinstance(profile, _Bundled):
+            profile = _bundled(net)
+        if profile is None:
+            return
+        if net.vehicle is not None and profile.name != net.vehicle:
+            raise ValueError(
+                f"profile {profile.name} ({profile.file}) is not for the net's vehicle "
+                f"{net.vehicle}"
+            )
+        for spec in profile.commands:
+            self._nominal[spec.name] = spec.duration_s
 
     def nominal_s(self, command: Command) -> float:
         """The profile's nominal duration of ``command``."""
@@ -194,6 +219,16 @@ class Timing:
             if isinstance(limit, int | float):
                 return round(float(limit) * 1000)
         return round(self.nominal_s(command) * permille)
+
+
+def _bundled(net: Net) -> VehicleProfile | None:
+    """The bundled profile of ``net``'s vehicle, or None (no vehicle, or not bundled)."""
+    if net.vehicle is None:
+        return None
+    try:
+        return load_bundled_profile(net.vehicle)
+    except CoralError:
+        return None
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,8 @@ Typical use in a user's own tests::
 
     @given(schedules())
     def test_my_mission_always_ends_properly(schedule: Schedule) -> None:
-        run = run_schedule(Engine(net, approval), schedule, Timing(net))
+        timing = Timing(mission.net, profile=mission.profile)  # a coral_lang.Mission
+        run = run_schedule(Engine(mission.net, approval), schedule, timing)
         assert run.outcome is Outcome.FINAL
 """
 

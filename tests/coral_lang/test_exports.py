@@ -7,10 +7,10 @@ import coral_lang
 
 EXPECTED = {
     "AssertKind", "Assertion", "Command", "CommandSpec", "CompileError", "CompileResult",
-    "CoralError", "Diagnostic", "FinalMarking", "Net", "NetError", "ParamSpec", "Place",
+    "CoralError", "Diagnostic", "FinalMarking", "Mission", "Net", "NetError", "ParamSpec", "Place",
     "PlaceKind", "PnmlError", "ProfileError", "Severity", "SpaceTrap", "Span", "Transition",
     "TransitionKind", "VehicleProfile", "compile_file", "compile_mission", "compile_source",
-    "format_mission", "load_bundled_profile", "load_net_file", "load_profile", "parse",
+    "format_mission", "load_bundled_profile", "load_mission", "load_net_file", "load_profile", "parse",
     "parse_pnml", "parse_profile", "read_pnml", "render_all", "to_dot", "to_pnml", "write_pnml",
 }  # fmt: skip
 

@@ -8,7 +8,9 @@ from analysis.certificate import CertificateCheck, check_certificate, make_certi
 from analysis.certificate import write_certificate as write_cert
 from analysis.verify import verify
 from coral_lang.compiler import compile_source
+from coral_lang.mission import profile_content
 from coral_lang.net import Net
+from coral_lang.profile import VehicleProfile, bundled_profile_path, load_bundled_profile
 from tests.conftest import EXAMPLES
 
 POOL_MISSION = EXAMPLES / "pool_mission" / "pool_mission.coral"
@@ -19,8 +21,14 @@ def compile_text(text: str) -> Net:
     return compile_source(text, "test.coral").raise_for_errors()
 
 
-def approve(net: Net, directory: Path) -> CertificateCheck:
-    """Verify ``net``, write its certificate into ``directory`` and check it."""
+def approve(net: Net, directory: Path, profile: VehicleProfile | None = None) -> CertificateCheck:
+    """Verify ``net``, write its certificate into ``directory`` and check it.
+
+    The certificate covers ``profile`` (default: the net's bundled vehicle profile, if
+    there is one), as a run's gate requires."""
     path = directory / f"{net.name}.certificate.json"
-    write_cert(make_certificate(verify(net)), path)
-    return check_certificate(net, path)
+    if profile is None and net.vehicle and bundled_profile_path(net.vehicle) is not None:
+        profile = load_bundled_profile(net.vehicle)
+    content = profile_content(net, profile)
+    write_cert(make_certificate(verify(net), profile_content=content), path)
+    return check_certificate(net, path, profile_content=content)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -180,3 +181,53 @@ def test_realtime_simulator_over_localhost_sockets(
         assert log.count("command-sent") == 23
         assert log.meta["realtime"] is True
         assert sum(1 for _ in log.samples()) > 50  # telemetry over real UDP
+
+
+# -- --profile ----------------------------------------------------------------------------
+
+SURVEY = POOL_MISSION.parent.parent / "survey_auv" / "survey.coral"
+MINNOW = POOL_MISSION.parent.parent / "profiles" / "minnow.yaml"
+
+
+def test_help_lists_the_profile_option(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    assert "--profile YAML" in capsys.readouterr().out
+    assert build_run_parser().parse_args(["m", "--profile", "a", "--profile", "b"]).profile == [
+        "a",
+        "b",
+    ]
+
+
+def test_a_mission_for_a_vehicle_given_by_profile_gets_past_compile_and_certificate(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cert = tmp_path / "survey.json"
+    argv = [str(SURVEY), "--verify", "--certificate", str(cert), "--out", str(tmp_path / "run")]
+    assert main([*argv, "--no-plots", "-q"]) == 2  # without its profile: does not compile
+    assert "no vehicle profile for 'MINNOW'" in capsys.readouterr().err
+    assert not cert.exists()
+    main([*argv, "--no-plots", "-q", "--profile", str(MINNOW)])
+    captured = capsys.readouterr()
+    assert "no vehicle profile" not in captured.err
+    assert f"certificate written to {cert}" in captured.out
+    section = json.loads(cert.read_text())["profile"]
+    assert section["vehicle"] == "MINNOW" and section["file"] == str(MINNOW)
+    assert {"DEPTH?", "GPS_FIX?", "SURVEY_LINE"} <= set(section["commands"])
+
+
+@pytest.mark.parametrize("resume", [False, True], ids=["run", "resume"])
+def test_a_bad_profile_file_is_an_input_error_naming_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], resume: bool
+) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("vehicle: X\ncommands:\n  A: {kind: task, replies: [ack], duration_s: -1}\n")
+    where = ["--resume", str(tmp_path / "none.sqlite")] if resume else [str(POOL_MISSION)]
+    code = main([*where, "--profile", str(bad), "--out", str(tmp_path / "run")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert f"{bad}:3:" in err and "duration must be >= 0" in err
+    assert "Traceback" not in err
+    missing = tmp_path / "missing.yaml"
+    assert main([str(POOL_MISSION), "--profile", str(missing), "--out", str(tmp_path)]) == 2
+    assert f"{missing}: cannot read profile" in capsys.readouterr().err

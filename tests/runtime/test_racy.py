@@ -44,7 +44,11 @@ RACE_MARKINGS = ({"depth_acked": 1, "aborted": 1}, {"depth_failed": 1, "aborted"
 # Generation and shrinking only: no "explain" phase (it re-runs the search to annotate
 # the failure, seconds that tell us nothing here), no example database.
 SEARCH = settings(
-    database=None, max_examples=2000, phases=[Phase.generate, Phase.shrink], deadline=None
+    database=None,
+    max_examples=2000,
+    phases=[Phase.generate, Phase.shrink],
+    deadline=None,
+    derandomize=True,
 )
 
 HOSTILE_RACE_SEED = 81

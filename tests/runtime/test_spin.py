@@ -15,13 +15,15 @@ import asyncio
 import functools
 import json
 import random
+from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
 
 from analysis.certificate import CertificateCheck
-from coral_lang.compiler import compile_mission
+from coral_lang.mission import load_mission
 from coral_lang.net import Net
+from coral_lang.profile import VehicleProfile
 from romeo_sim.config import default_config
 from romeo_sim.server import VehicleServer
 from romeo_sim.vehicle import Vehicle
@@ -330,10 +332,14 @@ def spinning(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     path.write_text(SPINNING, encoding="utf-8")
 
     def approve(
-        mission: str | Path, certificate: str | Path | None = None, *, issue: bool = False
+        mission: str | Path,
+        certificate: str | Path | None = None,
+        *,
+        issue: bool = False,
+        profiles: Sequence[VehicleProfile] = (),
     ) -> gate.ApprovedMission:
-        net = compile_mission(Path(mission))
-        return gate.ApprovedMission(Path(mission), net, hand_approval(net), False)
+        loaded = load_mission(Path(mission), profiles)
+        return gate.ApprovedMission(loaded, hand_approval(loaded.net), False)
 
     monkeypatch.setattr(gate, "approve_mission", approve)
     return path

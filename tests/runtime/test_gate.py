@@ -1,0 +1,124 @@
+"""The pre-run gate with vehicle profiles: a mission for a vehicle whose profile is not
+bundled compiles, is certified and approved; a profile edited since is refused; and the
+schedule's work times come from the profile the mission compiled against."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from analysis.certificate import CertificateError, make_certificate, write_certificate
+from analysis.verify import VerifyOptions, verify
+from coral_lang import CompileError, load_mission, load_profile
+from coral_lang.net import Command
+from runtime.gate import approve_mission, check_mission_certificate, default_certificate_path
+from runtime.schedule import DEFAULT_WORK_S, Timing
+from tests.conftest import EXAMPLES
+
+SURVEY = EXAMPLES / "survey_auv" / "survey.coral"
+MINNOW = EXAMPLES / "profiles" / "minnow.yaml"
+POOL = EXAMPLES / "pool_mission" / "pool_mission.coral"
+
+
+def _edited_minnow(tmp_path: Path, old: str, new: str) -> Path:
+    text = MINNOW.read_text(encoding="utf-8")
+    assert old in text
+    path = tmp_path / "minnow.yaml"
+    path.write_text(text.replace(old, new, 1), encoding="utf-8")
+    return path
+
+
+def test_a_mission_for_a_vehicle_given_by_profile_is_certified_and_approved(
+    tmp_path: Path,
+) -> None:
+    cert = tmp_path / "survey.cert.json"
+    minnow = load_profile(MINNOW)
+    issued = approve_mission(SURVEY, cert, issue=True, profiles=[minnow])
+    assert issued.issued_now and issued.path == SURVEY
+    assert issued.mission.profile is minnow and issued.net is issued.mission.net
+    assert issued.approval.net_digest == issued.net.digest()
+    assert issued.approval.profile_digest == issued.mission.profile_digest()
+    section = json.loads(cert.read_text())["profile"]
+    assert section["vehicle"] == "MINNOW" and section["digest"] == issued.mission.profile_digest()
+    again = approve_mission(SURVEY, cert, profiles=[load_profile(MINNOW)])
+    assert not again.issued_now and again.approval.profile_digest == section["digest"]
+
+
+def test_without_its_profile_the_mission_does_not_compile(tmp_path: Path) -> None:
+    with pytest.raises(CompileError, match="no vehicle profile for 'MINNOW'"):
+        approve_mission(SURVEY, tmp_path / "cert.json", issue=True)
+
+
+def test_a_profile_edited_since_certification_is_refused_and_reissued_on_request(
+    tmp_path: Path,
+) -> None:
+    cert = tmp_path / "survey.cert.json"
+    approve_mission(SURVEY, cert, issue=True, profiles=[load_profile(MINNOW)])
+    slower = load_profile(_edited_minnow(tmp_path, "duration_s: 60.0 ", "duration_s: 90.0 "))
+    with pytest.raises(CertificateError) as refused:
+        approve_mission(SURVEY, cert, profiles=[slower])
+    message = str(refused.value)
+    assert "profile MINNOW changed since certification: DEPTH?.duration_s 60 -> 90;" in message
+    assert f"--profile {tmp_path / 'minnow.yaml'}" in message
+    reissued = approve_mission(SURVEY, cert, issue=True, profiles=[slower])
+    assert reissued.issued_now
+    assert json.loads(cert.read_text())["profile"]["commands"]["DEPTH?"]["duration_s"] == 90.0
+
+
+def test_a_certificate_from_before_profile_coverage_does_not_run(tmp_path: Path) -> None:
+    mission = load_mission(POOL)
+    cert = tmp_path / "pool.cert.json"
+    write_certificate(make_certificate(verify(mission.net, VerifyOptions(structural=False))), cert)
+    with pytest.raises(CertificateError, match="predates profile coverage"):
+        approve_mission(POOL, cert)
+    with pytest.raises(CertificateError, match="predates profile coverage"):
+        check_mission_certificate(mission, cert)
+
+
+def test_check_mission_certificate_defaults_to_the_file_beside_the_mission(
+    tmp_path: Path,
+) -> None:
+    mission_file = tmp_path / "dive.coral"
+    mission_file.write_text(
+        "mission dive\nvehicle ROMEO\nplace a = 1, b, c\nfinal { b }\nfinal { c }\n"
+        "transition t wait { a } action { ROMEO(DEPTH, z = 2.0) -> { ack: b, error: c } }\n",
+        encoding="utf-8",
+    )
+    approved = approve_mission(mission_file, issue=True)
+    assert approved.approval.path == str(default_certificate_path(mission_file))
+    accepted = check_mission_certificate(approved.mission)
+    assert accepted.profile_digest == approved.mission.profile_digest()
+
+
+# -- the schedule's work times ------------------------------------------------------------
+
+
+def test_timing_takes_the_missions_profile() -> None:
+    mission = load_mission(SURVEY, [load_profile(MINNOW)])
+    depth = next(
+        t.command
+        for t in mission.net.transitions
+        if t.command is not None and t.command.name == "DEPTH?"
+    )
+    assert Timing(mission.net, profile=mission.profile).nominal_s(depth) == 60.0
+    # MINNOW is not bundled: looked up by name, every command takes the default.
+    assert Timing(mission.net).nominal_s(depth) == DEFAULT_WORK_S
+    assert Timing(mission.net, profile=None).nominal_s(depth) == DEFAULT_WORK_S
+
+
+def test_timing_still_finds_a_bundled_profile_by_name() -> None:
+    mission = load_mission(POOL)
+    command = Command("ROMEO", "DEPTH?", ())
+    assert mission.profile is not None
+    expected = mission.profile.command("DEPTH?")
+    assert expected is not None and expected.duration_s != DEFAULT_WORK_S
+    assert Timing(mission.net).nominal_s(command) == expected.duration_s
+    assert Timing(mission.net, profile=mission.profile).nominal_s(command) == expected.duration_s
+
+
+def test_timing_refuses_the_profile_of_another_vehicle() -> None:
+    mission = load_mission(POOL)
+    with pytest.raises(ValueError, match="not for the net's vehicle ROMEO"):
+        Timing(mission.net, profile=load_profile(MINNOW))
