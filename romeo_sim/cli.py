@@ -6,7 +6,7 @@ DIR, and prints a summary. The exit code is 0 when the mission completed, 1 when
 not, 2 for a bad vehicle file or arguments.
 
 ``romeo-sim serve --key-file FILE`` serves the vehicle to a controller (the CORAL engine)
-on TCP and UDP (`romeo_sim.server.VehicleServer`) until Ctrl-C or ``--duration``; it
+on TCP and UDP (`runtime.vehicle.server.VehicleServer`) until Ctrl-C or ``--duration``; it
 prints ``listening on HOST:PORT`` first. The exit code is 0 after a clean stop, 2 for a
 missing or bad key, a bad vehicle file or arguments, 1 if the address cannot be bound.
 """
@@ -14,14 +14,12 @@ missing or bad key, a bad vehicle file or arguments, 1 if the address cannot be 
 from __future__ import annotations
 
 import argparse
-import asyncio
 import math
 import sys
-import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from romeo_sim.config import VehicleConfig, VehicleConfigError, load_vehicle_config
+from romeo_sim.config import VehicleConfigError, load_vehicle_config
 
 __all__ = ["build_parser", "main"]
 
@@ -134,45 +132,18 @@ def _serve(args: argparse.Namespace) -> int:
     except VehicleConfigError as exc:
         print(f"romeo-sim: {exc}", file=sys.stderr)
         return 2
-    try:
-        return asyncio.run(_run_server(args, key, config))
-    except KeyboardInterrupt:
-        print("romeo-sim: stopped (Ctrl-C)", file=sys.stderr)
-        return 0
-
-
-async def _run_server(args: argparse.Namespace, key: bytes, config: VehicleConfig | None) -> int:
-    from romeo_sim.server import VehicleServer
     from romeo_sim.vehicle import Vehicle
+    from runtime.vehicle.server import run_vehicle
 
-    server = VehicleServer(
+    return run_vehicle(
         Vehicle(config, seed=args.seed),
         key,
         host=args.host,
         port=args.port,
-        clock=time.monotonic,
         speed=args.speed,
+        duration=args.duration,
+        log=lambda line: print(f"romeo-sim: {line}", file=sys.stderr, flush=True),
     )
-    try:
-        host, port = await server.start()
-    except OSError as exc:
-        print(f"romeo-sim: cannot listen on {args.host}:{args.port}: {exc}", file=sys.stderr)
-        await server.stop()
-        return 1
-    print(f"listening on {host}:{port}", flush=True)
-    try:
-        if args.duration is None:
-            await asyncio.Event().wait()
-        else:
-            await asyncio.sleep(args.duration)
-    finally:
-        await server.stop()
-        print(
-            f"romeo-sim: stopped at vehicle time {server.vehicle.time:.1f} s; "
-            f"{server.stats.summary()}",
-            file=sys.stderr,
-        )
-    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:

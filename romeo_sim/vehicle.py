@@ -56,6 +56,7 @@ from romeo_sim.tasks import (
     SrmTask,
     Task,
 )
+from runtime.vehicle.model import Reply
 
 __all__ = ["SUPPORTED_COMMANDS", "Reply", "Telemetry", "Vehicle", "VehicleEvent"]
 
@@ -79,25 +80,6 @@ SUPPORTED_COMMANDS: tuple[str, ...] = (
 )
 _RESOURCES: tuple[str, ...] = ("depth", "heading", "horizontal")
 WATCHDOG_ID = -1
-
-
-@dataclass(frozen=True)
-class Reply:
-    """One reply of the vehicle to a command.
-
-    Attributes:
-        command_id: the id of the command it answers.
-        command: that command's name.
-        kind: a reply kind of the profile (``ack``, ``done``, ``timeout``, ``error``...).
-        time: vehicle time when it was produced, s.
-        detail: free text for people and logs.
-    """
-
-    command_id: int
-    command: str
-    kind: str
-    time: float
-    detail: str = ""
 
 
 @dataclass(frozen=True)
@@ -228,6 +210,13 @@ class Vehicle:
     def time(self) -> float:
         """The vehicle clock, s."""
         return self._clock
+
+    @property
+    def watchdog_s(self) -> float:
+        """Vehicle seconds without a word from the controller before ROMEO surfaces by
+        itself (``watchdog_s`` of its vehicle file); the server reports it to the
+        controller (`runtime.vehicle.model.VehicleModel.watchdog_s`)."""
+        return self.config.watchdog_s
 
     @property
     def state_time(self) -> float:

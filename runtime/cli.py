@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from coral_lang.diagnostics import CoralError
+from runtime.vehicle.options import add_simulation_arguments, fault_plan_from_args
 
 EXIT_OK = 0
 EXIT_MISSION_FAILED = 1
@@ -77,7 +78,10 @@ def build_run_parser() -> argparse.ArgumentParser:
         "--vehicle", type=_host_port, metavar="HOST:PORT", help="a vehicle serving the protocol"
     )
     where.add_argument(
-        "--sim", action="store_true", help="run the simulated ROMEO in this process (default)"
+        "--sim",
+        action="store_true",
+        help="run a simulated vehicle in this process (default): the one registered for the "
+        "mission's vehicle (ROMEO's physics for ROMEO), else the generic one for its profile",
     )
     parser.add_argument(
         "--realtime",
@@ -126,6 +130,7 @@ def build_run_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--no-plots", action="store_true", help="do not draw the timeline")
     parser.add_argument("-q", "--quiet", action="store_true", help="print the summary only")
+    add_simulation_arguments(parser)
     return parser
 
 
@@ -157,6 +162,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("give a MISSION to run, or --resume LOG")
     if options.realtime and options.vehicle is not None:
         parser.error("--realtime applies to the simulator; a --vehicle always runs in real time")
+    if options.vehicle is not None and (
+        options.fault or options.faults or options.simulator or options.sim_config
+    ):
+        parser.error(
+            "--simulator, --sim-config, --fault and --faults shape a simulated vehicle; "
+            "a --vehicle is a real one"
+        )
+    if options.speed != 1.0 and not options.realtime:
+        parser.error("--speed applies to a simulator in real time: add --realtime")
     from runtime.engine import EngineSpin
 
     try:
@@ -185,6 +199,7 @@ def _run(options: argparse.Namespace) -> int:
     # First: a bad profile file is bad input (exit 2, its file, line and column), and
     # should be reported before a key or a log is touched.
     profiles = [load_profile(path) for path in options.profile]
+    faults = fault_plan_from_args(options)
     simulated = options.vehicle is None
     if options.key_file is None and options.key_hex is None and simulated:
         psk = secrets.token_bytes(32)  # the simulator runs in this process: a fresh key
@@ -208,6 +223,8 @@ def _run(options: argparse.Namespace) -> int:
                 return EXIT_USAGE
             mission_path = recorded
         out_dir = options.resume.parent
+        if not profiles:
+            profiles = [load_profile(path) for path in _recorded_profiles(options.resume)]
     approved = approve_mission(
         mission_path, options.certificate, issue=options.verify, profiles=profiles
     )
@@ -228,6 +245,9 @@ def _run(options: argparse.Namespace) -> int:
         speed=options.speed,
         time_limit=options.time_limit,
         console=console,
+        simulator=options.simulator,
+        sim_config=options.sim_config,
+        faults=faults,
     )
     if options.resume is not None:
         result = resume_mission(approved, options.resume, config)
@@ -252,6 +272,17 @@ def _run(options: argparse.Namespace) -> int:
             print(f"coral-run: wrote {path}")
     print(f"coral-run: logs in {out_dir}/")
     return EXIT_OK if result.ok else EXIT_MISSION_FAILED
+
+
+def _recorded_profiles(log_path: Path) -> list[Path]:
+    """The profile files a run recorded in its log (``--resume`` without ``--profile``)."""
+    from runtime.eventlog import EventLog
+
+    with EventLog.open(log_path) as log:
+        recorded = log.meta.get("profiles")
+    if not isinstance(recorded, list):
+        return []
+    return [Path(p) for p in recorded if isinstance(p, str) and Path(p).is_file()]
 
 
 def _timeline(options: argparse.Namespace) -> int:

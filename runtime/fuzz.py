@@ -32,28 +32,33 @@ import hashlib
 import json
 import math
 import random
+import shlex
 import shutil
 import statistics
 import sys
 import tempfile
 import time
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
-from analysis.certificate import CertificateCheck, CertificateError, check_certificate
+from analysis.certificate import CertificateCheck, CertificateError
 from coral_lang.diagnostics import CoralError
-from coral_lang.net import Net, format_tokens
+from coral_lang.mission import Mission
+from coral_lang.net import Net, TransitionKind, format_tokens
 from runtime.controller import Controller, ControllerOptions, RunEnd, RunResult
 from runtime.engine import Engine, Policy
 from runtime.eventlog import Event, EventLog
 from runtime.link import LinkEmulator, LinkProfile, MemoryLink, load_link_profile
 from runtime.vclock import run_virtual
+from runtime.vehicle.model import VehicleModel
+from runtime.vehicle.options import add_simulation_arguments, fault_plan_from_args
 
 if TYPE_CHECKING:
-    from romeo_sim.config import VehicleConfig
+    from coral_lang.profile import VehicleProfile
+    from runtime.faultplan import FaultPlan
 
 __all__ = [
     "UNVERIFIED",
@@ -94,18 +99,30 @@ class FuzzOptions:
         runs: how many runs.
         seed: run ``i`` uses run seed ``seed + i``.
         link: the link profile every run emulates (each run with its own seed).
-        vehicle_config: the simulated vehicle (None: the bundled ROMEO).
         time_limit: virtual seconds after which a run is ended (counted as a failure).
         policy: the engine's choice rule; RANDOM (default) varies the order of enabled
             transitions with the run seed, PRIORITY runs what would run at sea.
+        profile: the vehicle profile the mission was compiled against (None: the
+            bundled profile of the net's vehicle).
+        simulator: the registered simulator (None: the one for the vehicle, else the
+            generic one; ``runtime.vehicle.registry``).
+        sim_config: that simulator's settings file (ROMEO: a vehicle YAML).
+        faults: replies to force in every run (``runtime.faultplan``); a rule with a
+            rate draws afresh in each run, from the run seed.
+        vehicle_factory: builds the vehicle from a seed instead of the registry (for
+            tests and scripts that shape the vehicle in code); faults still apply.
     """
 
     runs: int
     seed: int
     link: LinkProfile
-    vehicle_config: VehicleConfig | None = None
     time_limit: float = 3600.0
     policy: Policy = Policy.RANDOM
+    profile: VehicleProfile | None = None
+    simulator: str | None = None
+    sim_config: Path | None = None
+    faults: FaultPlan | None = None
+    vehicle_factory: Callable[[int], VehicleModel] | None = None
 
 
 @dataclass(frozen=True)
@@ -131,6 +148,8 @@ class FuzzRun:
         detail: why the run ended so, when there is more to say (a spin: its cycle).
         events: the controller's events, when asked for (`run_one` ``keep_events``).
         log: where the controller's log was kept (failures and replays), if anywhere.
+        fired: how often each net transition fired (reply transitions included: a reply
+            the net consumes fires its reply transition); never-fired ones are absent.
     """
 
     index: int
@@ -150,6 +169,7 @@ class FuzzRun:
     detail: str = ""
     events: tuple[Event, ...] = field(default=(), repr=False, compare=False)
     log: Path | None = None
+    fired: Mapping[str, int] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
@@ -180,6 +200,7 @@ class FuzzRun:
             "wall_seconds": self.wall_seconds,
             "detail": self.detail,
             "log": None if self.log is None else str(self.log),
+            "transitions_fired": len(self.fired),
         }
 
 
@@ -234,7 +255,7 @@ def run_one(
         try:
             log.relax_durability()
             result, vehicle_commands = run_virtual(_simulate(net, approval, seed, options, log))
-            events = tuple(log.events())
+            digest, fired, events = _read_events(log, keep_events)
         finally:
             log.close()
         kept: Path | None = keep_log
@@ -256,36 +277,54 @@ def run_one(
         duplicate_replies=result.duplicate_replies,
         unexpected_replies=result.unexpected_replies,
         vehicle_commands=vehicle_commands,
-        events_digest=events_digest(events),
+        events_digest=digest,
         wall_seconds=time.perf_counter() - started,
         detail=result.detail,
-        events=events if keep_events else (),
+        events=events,
         log=kept,
+        fired=fired,
     )
 
 
-def events_digest(events: Sequence[Event]) -> str:
+def _read_events(log: EventLog, keep: bool) -> tuple[str, dict[str, int], tuple[Event, ...]]:
+    """One pass over the log: the events' digest, the transitions fired, and the events
+    themselves only if ``keep`` (a long mission's events need not all sit in memory)."""
+    h = hashlib.sha256()
+    fired: Counter[str] = Counter()
+    kept: list[Event] = []
+    for event in log.events():
+        h.update(_digest_line(event))
+        if event.kind == "fire":
+            transition = event.data.get("transition")
+            if isinstance(transition, str):
+                fired[transition] += 1
+        if keep:
+            kept.append(event)
+    return "sha256:" + h.hexdigest(), dict(fired), tuple(kept)
+
+
+def events_digest(events: Iterable[Event]) -> str:
     """SHA-256 of an event sequence: kinds, times and data, in order."""
     h = hashlib.sha256()
     for event in events:
-        line = json.dumps([event.seq, event.time, event.kind, event.data], sort_keys=True)
-        h.update(line.encode())
-        h.update(b"\n")
+        h.update(_digest_line(event))
     return "sha256:" + h.hexdigest()
+
+
+def _digest_line(event: Event) -> bytes:
+    line = json.dumps([event.seq, event.time, event.kind, event.data], sort_keys=True)
+    return line.encode() + b"\n"
 
 
 async def _simulate(
     net: Net, approval: CertificateCheck, seed: int, options: FuzzOptions, log: EventLog
 ) -> tuple[RunResult, int]:
-    """One controller run against the simulated ROMEO over an emulated in-memory link."""
-    from romeo_sim.config import default_config
-    from romeo_sim.server import VehicleServer
-    from romeo_sim.vehicle import Vehicle
+    """One controller run against a simulated vehicle over an emulated in-memory link."""
+    from runtime.vehicle.server import VehicleServer
 
     loop = asyncio.get_running_loop()
-    config = options.vehicle_config if options.vehicle_config is not None else default_config()
     server = VehicleServer(
-        Vehicle(config, seed=_rng(seed, "vehicle").getrandbits(63)),
+        make_vehicle(net, options, _rng(seed, "vehicle").getrandbits(63)),
         PSK,
         clock=loop.time,
         nonces=_rng(seed, "vehicle-nonces").randbytes,
@@ -312,11 +351,130 @@ async def _simulate(
     return result, server.stats.commands
 
 
+def make_vehicle(net: Net, options: FuzzOptions, seed: int) -> VehicleModel:
+    """The simulated vehicle of one run, seeded with ``seed``, faults injected.
+
+    Raises:
+        runtime.vehicle.registry.SimulatorError: no simulator for it.
+        runtime.faultplan.FaultPlanError: a fault rule does not fit the profile.
+        coral_lang.diagnostics.ProfileError: no profile given and none bundled.
+    """
+    from runtime.vehicle.registry import create_vehicle, inject_faults
+
+    profile = options.profile
+    if profile is None:
+        from coral_lang.profile import load_bundled_profile
+
+        profile = load_bundled_profile(net.vehicle or "")
+    if options.vehicle_factory is not None:
+        return inject_faults(options.vehicle_factory(seed), profile, options.faults, seed)
+    return create_vehicle(
+        profile,
+        simulator=options.simulator,
+        seed=seed,
+        config=options.sim_config,
+        faults=options.faults,
+    )
+
+
 def _quiet(line: str) -> None:
     del line  # progress lines of the controller, the link and the vehicle: not wanted here
 
 
 # ---------------------------------------------------------------------------- many runs
+
+
+@dataclass(frozen=True)
+class NeverFired:
+    """A transition no run fired: a branch of the mission the campaign never rehearsed.
+
+    Attributes:
+        transition: its name (a reply transition is ``COMMAND_TRANSITION.KIND``).
+        line: ``file:line`` of the mission text that made it (None: no source, e.g. PNML).
+        command: the vehicle command it sends (command transitions) or answers (reply
+            transitions); None for a plain transition.
+        reply: the reply kind, for a reply transition; else None.
+    """
+
+    transition: str
+    line: str | None
+    command: str | None
+    reply: str | None
+
+    def describe(self) -> str:
+        """E.g. ``check_depth.timeout (pool.coral:30): DEPTH? replied timeout``."""
+        where = f" ({self.line})" if self.line else ""
+        if self.reply is not None:
+            return f"{self.transition}{where}: {self.command or '?'} replied {self.reply}"
+        if self.command is not None:
+            return f"{self.transition}{where}: sends {self.command}"
+        return f"{self.transition}{where}"
+
+    def to_json(self) -> dict[str, object]:
+        """JSON-ready form."""
+        return {
+            "transition": self.transition,
+            "line": self.line,
+            "command": self.command,
+            "reply": self.reply,
+        }
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """Which of the net's transitions the runs fired, summed over all runs.
+
+    Attributes:
+        transitions: how many transitions the net has.
+        fired: transition -> times fired over all runs (fired ones only, in net order).
+        never: the transitions no run fired, in net order.
+    """
+
+    transitions: int
+    fired: Mapping[str, int]
+    never: tuple[NeverFired, ...]
+
+    @property
+    def exercised(self) -> int:
+        """How many transitions fired at least once."""
+        return len(self.fired)
+
+    @property
+    def share(self) -> float:
+        """``exercised / transitions`` (1 for a net without transitions)."""
+        return self.exercised / self.transitions if self.transitions else 1.0
+
+    @classmethod
+    def of(cls, net: Net, runs: Iterable[FuzzRun]) -> Coverage:
+        """The coverage of ``runs`` of ``net``."""
+        totals: Counter[str] = Counter()
+        for run in runs:
+            totals.update(run.fired)
+        fired = {t.name: totals[t.name] for t in net.transitions if totals[t.name]}
+        never = tuple(_never_fired(net, t.name) for t in net.transitions if t.name not in fired)
+        return cls(transitions=len(net.transitions), fired=fired, never=never)
+
+    def to_json(self) -> dict[str, object]:
+        """JSON-ready form (``coverage`` in ``fuzz-report.json``)."""
+        return {
+            "transitions": self.transitions,
+            "exercised": self.exercised,
+            "fired": dict(self.fired),
+            "never": [n.to_json() for n in self.never],
+        }
+
+
+def _never_fired(net: Net, name: str) -> NeverFired:
+    transition = net.transition(name)
+    line = None if transition.span is None else f"{transition.span.file}:{transition.span.line}"
+    command = None if transition.command is None else transition.command.name
+    reply = None
+    if transition.kind is TransitionKind.REPLY:
+        reply = transition.reply
+        if transition.reply_to is not None:
+            sender = net.transition(transition.reply_to).command
+            command = None if sender is None else sender.name
+    return NeverFired(transition=name, line=line, command=command, reply=reply)
 
 
 @dataclass
@@ -331,6 +489,8 @@ class FuzzReport:
     interrupted: bool = False
     predicted_deadlocks: set[tuple[tuple[str, int], ...]] | None = None
     """The dead markings analysis finds (None: not explored, or too large to explore)."""
+    net: Net | None = field(default=None, repr=False)
+    """The mission's net, for `coverage` (None: no coverage reported)."""
 
     @property
     def failures(self) -> list[FuzzRun]:
@@ -364,24 +524,33 @@ class FuzzReport:
             return None
         return tuple(sorted(run.marking.items())) in self.predicted_deadlocks
 
+    def coverage(self) -> Coverage | None:
+        """Which transitions the runs fired (None when the report has no `net`)."""
+        return None if self.net is None else Coverage.of(self.net, self.runs)
+
     def longest(self, count: int = 5) -> list[FuzzRun]:
         """The ``count`` longest runs, longest first."""
         return sorted(self.runs, key=lambda r: (-r.duration, r.seed))[:count]
 
     def to_json(self) -> dict[str, object]:
         """The report as JSON-ready data."""
+        coverage = self.coverage()
         return {
             "mission": self.mission,
             "mission_path": self.mission_path,
             "link": self.options.link.name,
             "seed": self.options.seed,
             "runs_requested": self.options.runs,
+            "vehicle": self.options.profile.name if self.options.profile else None,
+            "simulator": self.options.simulator,
+            "faults": None if self.options.faults is None else str(self.options.faults),
             "runs": [r.to_json() for r in self.runs],
             "interrupted": self.interrupted,
             "success_rate": self.success_rate,
             "durations": self.durations(),
             "wall_seconds": self.wall_seconds,
             "schedules_per_second": self.schedules_per_second,
+            "coverage": None if coverage is None else coverage.to_json(),
         }
 
 
@@ -430,6 +599,7 @@ def fuzz(
         runs=runs,
         wall_seconds=time.perf_counter() - started,
         interrupted=interrupted,
+        net=net,
     )
     if any(r.end is RunEnd.DEADLOCK for r in runs):
         report.predicted_deadlocks = predicted_deadlocks(net)
@@ -480,6 +650,9 @@ def format_report(report: FuzzReport, command: str) -> str:
             lines.append(
                 f"    seed {run.seed}: {run.duration:.1f} s, {run.ending()}, {_run_detail(run)}"
             )
+    coverage = report.coverage()
+    if coverage is not None:
+        lines.extend(_coverage_lines(coverage))
     failures = report.failures
     if failures:
         lines.append(f"  failures ({len(failures)}); each replays exactly with the command shown:")
@@ -500,6 +673,45 @@ def format_report(report: FuzzReport, command: str) -> str:
         f"  {report.wall_seconds:.1f} s wall, {report.schedules_per_second:.2f} schedules/s"
     )
     return "\n".join(lines)
+
+
+NEVER_SHOWN = 20
+"""At most this many never-fired transitions in the text report (all are in the JSON)."""
+
+
+def _coverage_lines(coverage: Coverage) -> list[str]:
+    lines = [
+        f"  coverage: exercised {coverage.exercised} of {coverage.transitions} transitions "
+        f"({100.0 * coverage.share:.1f} %)"
+    ]
+    never = coverage.never
+    if not never:
+        return lines
+    replies = sum(n.reply is not None for n in never)
+    lines.append(
+        f"  never fired ({len(never)}"
+        + (f", {replies} of them replies the vehicle never gave" if replies else "")
+        + "): branches this campaign never rehearsed"
+    )
+    shown = never[:NEVER_SHOWN]
+    name_width = max(len(n.transition) for n in shown)
+    line_width = max(len(n.line or "-") for n in shown)
+    for n in shown:
+        what = (
+            f"{n.command or '?'} replied {n.reply}"
+            if n.reply is not None
+            else (f"sends {n.command}" if n.command is not None else "")
+        )
+        row = f"    {n.transition:<{name_width}}  {n.line or '-':<{line_width}}  {what}"
+        lines.append(row.rstrip())
+    if len(never) > NEVER_SHOWN:
+        lines.append(f"    ... and {len(never) - NEVER_SHOWN} more in {REPORT_JSON}")
+    if replies:
+        lines.append(
+            "    replies a healthy simulator does not give need reply fuzzing: "
+            "--vary-replies 0.05, or --fault RULE to force one (docs/fuzz.md, Coverage)"
+        )
+    return lines
 
 
 def _run_detail(run: FuzzRun) -> str:
@@ -631,11 +843,12 @@ def build_parser() -> argparse.ArgumentParser:
         # No abbreviations: "--vehicle HOST:PORT" (coral-run's) must be refused, not taken
         # for --vehicle-config; fuzz never talks to a vehicle.
         allow_abbrev=False,
-        description="Run a mission against the simulated ROMEO under many random schedules "
+        description="Run a mission against a simulated vehicle under many random schedules "
         "(link delays, stalls, losses, resets, outages; the engine's order of enabled "
-        "transitions), in virtual time, and report how often it reaches a declared final "
-        "marking, how long it takes, and the seed that replays each failure. Only the "
-        "simulator is ever used.",
+        "transitions; with --vary-replies or --fault, the vehicle's replies), in virtual "
+        "time, and report how often it reaches a declared final marking, how long it takes, "
+        "which transitions of the net it exercised, and the seed that replays each "
+        "failure. Only a simulator is ever used.",
         epilog="exit codes: 0 every run reached a declared final marking, 1 some run did not, "
         "2 bad usage or input",
     )
@@ -657,10 +870,22 @@ def build_parser() -> argparse.ArgumentParser:
         help="link profile: ideal, lan, genoa-lisbon (default), hostile, or a YAML file",
     )
     parser.add_argument(
-        "--vehicle-config",
+        "--profile",
+        action="append",
+        default=[],
         type=Path,
         metavar="FILE",
-        help="simulated vehicle file (as for romeo-sim --vehicle; default: bundled ROMEO)",
+        help="vehicle profile (YAML) for a vehicle that has no bundled profile; "
+        "repeatable (as for coral-check and coral-run)",
+    )
+    parser.add_argument(
+        "--vary-replies",
+        type=_probability,
+        default=0.0,
+        metavar="P",
+        help="in each run, force each command's reply, with probability P, to one of its "
+        "other reply kinds (the rule '*=any@P' after any --fault rules; default 0: the "
+        "simulator's own replies)",
     )
     parser.add_argument(
         "--certificate",
@@ -696,22 +921,36 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--no-plot", action="store_true", help="do not draw the histogram")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    add_simulation_arguments(parser, config_aliases=("--vehicle-config",))
     return parser
 
 
+def _probability(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a probability, got {text!r}") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a probability in [0, 1], got {text!r}")
+    return value
+
+
 def approval_for(
-    net: Net, mission: Path, certificate: Path | None, *, unverified: bool
+    mission: Mission, certificate: Path | None, *, unverified: bool
 ) -> tuple[CertificateCheck, str | None]:
     """The approval to fuzz with, and the reason it is unverified (None if verified).
+
+    The certificate is checked as a run checks it: against the net and the vehicle
+    profile the mission was compiled with.
 
     Raises:
         CertificateError: no passing certificate and not ``unverified``.
     """
-    from runtime.gate import default_certificate_path
+    from runtime.gate import check_mission_certificate
 
-    path = certificate if certificate is not None else default_certificate_path(mission)
+    net = mission.net
     try:
-        return check_certificate(net, path), None
+        return check_mission_certificate(mission, certificate), None
     except CertificateError as exc:
         if not unverified:
             raise CertificateError(
@@ -727,30 +966,30 @@ def approval_for(
 
 def main(argv: Sequence[str] | None = None, *, stderr: IO[str] | None = None) -> int:
     """``coral-run fuzz``; returns the exit code."""
-    from romeo_sim.config import VehicleConfigError
-
     err = stderr if stderr is not None else sys.stderr
     options = build_parser().parse_args(argv)
     try:
         return _fuzz(options, err)
-    except (CoralError, VehicleConfigError, OSError) as exc:
+    except (CoralError, OSError) as exc:
         print(f"coral-run fuzz: {exc}", file=err)
         return EXIT_USAGE
 
 
 def _fuzz(options: argparse.Namespace, err: IO[str]) -> int:
-    from coral_lang.compiler import compile_mission
+    from coral_lang.mission import load_mission
+    from coral_lang.profile import load_profile
+    from runtime.faultplan import parse_fault_rules
 
     mission = Path(options.mission)
-    net = compile_mission(mission)
+    compiled = load_mission(mission, [load_profile(path) for path in options.profile])
+    net = compiled.net
     link = load_link_profile(options.link)
-    vehicle = None
-    if options.vehicle_config is not None:
-        from romeo_sim.config import load_vehicle_config
-
-        vehicle = load_vehicle_config(options.vehicle_config)
+    faults = fault_plan_from_args(options)
+    if options.vary_replies > 0.0:
+        vary = parse_fault_rules([f"*=any@{options.vary_replies:g}"], source="--vary-replies")
+        faults = vary if faults is None else faults + vary
     approval, unverified = approval_for(
-        net, mission, options.certificate, unverified=options.unverified
+        compiled, options.certificate, unverified=options.unverified
     )
     if unverified is not None:
         print(
@@ -763,10 +1002,14 @@ def _fuzz(options: argparse.Namespace, err: IO[str]) -> int:
         runs=1 if options.replay is not None else options.runs,
         seed=options.replay if options.replay is not None else options.seed,
         link=link,
-        vehicle_config=vehicle,
         time_limit=options.time_limit,
         policy=Policy(options.policy),
+        profile=compiled.profile,
+        simulator=options.simulator,
+        sim_config=options.sim_config,
+        faults=faults,
     )
+    make_vehicle(net, fuzz_options, 0)  # a simulator or fault plan that cannot be used: now
     out: Path = options.out
     out.mkdir(parents=True, exist_ok=True)
     command = _command(options)
@@ -806,8 +1049,16 @@ def _fuzz(options: argparse.Namespace, err: IO[str]) -> int:
 def _command(options: argparse.Namespace) -> str:
     """How to call fuzz again with what shapes a run (not --runs/--seed/--out)."""
     parts = ["coral-run fuzz", str(options.mission), "--link", str(options.link)]
-    if options.vehicle_config is not None:
-        parts += ["--vehicle-config", str(options.vehicle_config)]
+    parts += [f"--profile {shlex.quote(str(p))}" for p in options.profile]
+    if options.simulator is not None:
+        parts += ["--simulator", options.simulator]
+    if options.sim_config is not None:
+        parts += ["--sim-config", str(options.sim_config)]
+    parts += [f"--fault {shlex.quote(rule)}" for rule in options.fault]
+    if options.faults is not None:
+        parts += ["--faults", str(options.faults)]
+    if options.vary_replies > 0.0:
+        parts += ["--vary-replies", f"{options.vary_replies:g}"]
     if options.certificate is not None:
         parts += ["--certificate", str(options.certificate)]
     if options.unverified:

@@ -2,7 +2,9 @@
 
 `run_mission` is what ``coral-run`` does. Three ways to reach a vehicle:
 
-* the simulator in virtual time (default): `romeo_sim` and the controller in one process,
+* a simulated vehicle in virtual time (default): the simulator registered for the
+  mission's vehicle (`runtime.vehicle.registry`: ROMEO's physics for ROMEO, the generic
+  vehicle for any other profile), with a fault plan if given, and the controller in one process,
   joined by an in-memory link through the link emulator, under
   `runtime.vclock.VirtualTimeLoop`; a mission of many minutes runs in seconds, and
   the same seed gives the same run;
@@ -28,9 +30,11 @@ from pathlib import Path
 from runtime.controller import Controller, ControllerOptions, RunResult
 from runtime.engine import Engine, Policy
 from runtime.eventlog import EventLog
+from runtime.faultplan import FaultPlan
 from runtime.gate import ApprovedMission
 from runtime.link import Link, LinkEmulator, LinkProfile, MemoryLink, SocketLink
 from runtime.vclock import run_virtual
+from runtime.vehicle.model import VehicleModel
 
 __all__ = ["RunConfig", "controller_log_path", "resume_mission", "run_mission"]
 
@@ -59,6 +63,10 @@ class RunConfig:
         time_limit: end the run after this many seconds (None: no limit).
         policy: the engine's choice rule.
         console: receives progress lines.
+        simulator: the registered simulator to run (None: the one for the mission's
+            vehicle, else the generic one).
+        sim_config: that simulator's settings file, if any.
+        faults: replies to force (``runtime.faultplan``), simulated vehicles only.
     """
 
     out_dir: Path
@@ -72,6 +80,9 @@ class RunConfig:
     policy: Policy = Policy.PRIORITY
     controller: ControllerOptions = field(default_factory=ControllerOptions)
     console: Callable[[str], None] = print
+    simulator: str | None = None
+    sim_config: Path | None = None
+    faults: FaultPlan | None = None
 
 
 def _meta(mission: ApprovedMission, config: RunConfig) -> dict[str, object]:
@@ -82,11 +93,41 @@ def _meta(mission: ApprovedMission, config: RunConfig) -> dict[str, object]:
         "seed": config.seed,
         "vehicle": "sim" if config.vehicle is None else f"{config.vehicle[0]}:{config.vehicle[1]}",
         "realtime": config.realtime or config.vehicle is not None,
+        "profiles": [str(Path(p.file).resolve()) for p in mission.mission.profiles if p.file],
+        "faults": None if config.faults is None else str(config.faults),
     }
+
+
+def _simulated_vehicle(mission: ApprovedMission, config: RunConfig) -> VehicleModel | None:
+    """The simulated vehicle of the run, None when it runs against a real one.
+
+    Built before any log is written, so a simulator or fault plan that cannot be used is
+    reported as bad input and leaves nothing behind.
+    """
+    from runtime.vehicle.registry import SimulatorError, create_vehicle
+
+    if config.vehicle is not None:
+        if config.faults is not None:
+            raise SimulatorError("a fault plan applies to a simulated vehicle, not to --vehicle")
+        return None
+
+    profile = mission.mission.profile
+    if profile is None:
+        raise SimulatorError(
+            f"{mission.path}: no vehicle profile to simulate '{mission.net.vehicle}' with"
+        )
+    return create_vehicle(
+        profile,
+        simulator=config.simulator,
+        seed=config.seed,
+        config=config.sim_config,
+        faults=config.faults,
+    )
 
 
 def run_mission(mission: ApprovedMission, config: RunConfig) -> RunResult:
     """Run ``mission`` as ``config`` says; returns the controller's result."""
+    model = _simulated_vehicle(mission, config)
     config.out_dir.mkdir(parents=True, exist_ok=True)
     rng = random.Random(config.seed)
     simulated = config.vehicle is None
@@ -115,7 +156,7 @@ def run_mission(mission: ApprovedMission, config: RunConfig) -> RunResult:
                 console=config.console,
             )
 
-        return _drive(config, make, rng, mission.net.name)
+        return _drive(config, make, rng, mission.net.name, model)
     finally:
         log.close()
 
@@ -128,6 +169,7 @@ def resume_mission(mission: ApprovedMission, log_path: Path, config: RunConfig) 
         runtime.engine.EngineError: the log's state does not belong to this net.
         ValueError: the log holds no committed state.
     """
+    model = _simulated_vehicle(mission, config)
     log = EventLog.open(log_path, writable=True)
     try:
         if log.net_digest is not None and log.net_digest != mission.net.digest():
@@ -151,7 +193,7 @@ def resume_mission(mission: ApprovedMission, log_path: Path, config: RunConfig) 
                 console=config.console,
             )
 
-        return _drive(config, make, rng, mission.net.name)
+        return _drive(config, make, rng, mission.net.name, model)
     finally:
         log.close()
 
@@ -173,13 +215,20 @@ def _net_json(mission: ApprovedMission) -> str:
 MakeController = Callable[[Link, float, Callable[[int], bytes]], Controller]
 
 
-def _drive(config: RunConfig, make: MakeController, rng: random.Random, mission: str) -> RunResult:
-    if config.vehicle is not None:
+def _drive(
+    config: RunConfig,
+    make: MakeController,
+    rng: random.Random,
+    mission: str,
+    model: VehicleModel | None,
+) -> RunResult:
+    if model is None:
+        assert config.vehicle is not None
         host, port = config.vehicle
         return asyncio.run(_remote(config, make, host, port))
     if config.realtime:
-        return asyncio.run(_simulated(config, make, rng, mission, sockets=True))
-    return run_virtual(_simulated(config, make, rng, mission, sockets=False))
+        return asyncio.run(_simulated(config, make, rng, mission, model, sockets=True))
+    return run_virtual(_simulated(config, make, rng, mission, model, sockets=False))
 
 
 def _emulator(config: RunConfig) -> LinkEmulator | None:
@@ -196,11 +245,15 @@ async def _remote(config: RunConfig, make: MakeController, host: str, port: int)
 
 
 async def _simulated(
-    config: RunConfig, make: MakeController, rng: random.Random, mission: str, *, sockets: bool
+    config: RunConfig,
+    make: MakeController,
+    rng: random.Random,
+    mission: str,
+    model: VehicleModel,
+    *,
+    sockets: bool,
 ) -> RunResult:
-    from romeo_sim.config import default_config
-    from romeo_sim.server import VehicleServer
-    from romeo_sim.vehicle import Vehicle
+    from runtime.vehicle.server import VehicleServer
 
     loop = asyncio.get_running_loop()
     vehicle_rng = random.Random(rng.getrandbits(64))
@@ -212,7 +265,7 @@ async def _simulated(
         meta={"seed": config.seed, "speed": config.speed},
     )
     server = VehicleServer(
-        Vehicle(default_config(), seed=config.seed),
+        model,
         config.psk,
         clock=loop.time,
         speed=config.speed if sockets else 1.0,

@@ -199,7 +199,7 @@ def test_help_lists_the_profile_option(capsys: pytest.CaptureFixture[str]) -> No
     ]
 
 
-def test_a_mission_for_a_vehicle_given_by_profile_gets_past_compile_and_certificate(
+def test_a_mission_for_a_vehicle_given_by_profile_runs_against_the_generic_vehicle(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     cert = tmp_path / "survey.json"
@@ -207,9 +207,10 @@ def test_a_mission_for_a_vehicle_given_by_profile_gets_past_compile_and_certific
     assert main([*argv, "--no-plots", "-q"]) == 2  # without its profile: does not compile
     assert "no vehicle profile for 'MINNOW'" in capsys.readouterr().err
     assert not cert.exists()
-    main([*argv, "--no-plots", "-q", "--profile", str(MINNOW)])
+    assert main([*argv, "--no-plots", "-q", "--profile", str(MINNOW)]) == 0
     captured = capsys.readouterr()
     assert "no vehicle profile" not in captured.err
+    assert "mission ended: final" in captured.out and "survey_complete" in captured.out
     assert f"certificate written to {cert}" in captured.out
     section = json.loads(cert.read_text())["profile"]
     assert section["vehicle"] == "MINNOW" and section["file"] == str(MINNOW)

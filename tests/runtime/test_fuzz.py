@@ -5,26 +5,35 @@ from __future__ import annotations
 import dataclasses
 import io
 import json
+from collections import Counter
 from pathlib import Path
 
 import pytest
 
+from coral_lang.mission import load_mission
+from coral_lang.net import TransitionKind
 from runtime import fuzz as fuzz_module
 from runtime.cli import main as coral_run
 from runtime.controller import RunEnd
 from runtime.engine import Policy
 from runtime.fuzz import (
+    NEVER_SHOWN,
+    REPORT_JSON,
     UNVERIFIED,
+    Coverage,
     FuzzOptions,
     FuzzReport,
+    NeverFired,
     ProgressBar,
     approval_for,
+    events_digest,
     format_report,
     fuzz,
     run_one,
     run_seed,
 )
 from runtime.link import BUILTIN_PROFILES
+from tests.conftest import EXAMPLES
 from tests.runtime.helpers import approve
 from tests.runtime.test_properties import MISSIONS, mission
 from tests.runtime.test_racy import HOSTILE_RACE_SEED, RACE_MARKINGS
@@ -155,6 +164,8 @@ def test_a_verified_mission_that_always_ends_well_exits_0(
     report = json.loads((tmp_path / "fuzz-report.json").read_text())
     assert report["success_rate"] == 1.0 and len(report["runs"]) == 2
     assert not (tmp_path / "failures").exists()
+    assert "coverage: exercised" in out
+    assert 0 < report["coverage"]["exercised"] < report["coverage"]["transitions"]
 
 
 def test_the_report_counts_endings_and_names_the_worst_runs() -> None:
@@ -213,7 +224,7 @@ def test_an_unverified_mission_needs_unverified(
 def test_the_unverified_approval_is_marked_and_only_ever_simulated() -> None:
     racy = mission("racy")
     approval, reason = approval_for(
-        racy.net, Path(RACY), Path("/nonexistent.json"), unverified=True
+        load_mission(Path(RACY)), Path("/nonexistent.json"), unverified=True
     )
     assert approval.path == UNVERIFIED and reason is not None
     assert approval.net_digest == racy.net.digest()
@@ -227,7 +238,8 @@ def test_the_unverified_approval_is_marked_and_only_ever_simulated() -> None:
 
 def test_a_verified_mission_keeps_its_certificate(pool_certificate: Path) -> None:
     pool = mission("pool")
-    approval, reason = approval_for(pool.net, Path(POOL), pool_certificate, unverified=True)
+    del pool
+    approval, reason = approval_for(load_mission(Path(POOL)), pool_certificate, unverified=True)
     assert reason is None and approval.path == str(pool_certificate)
 
 
@@ -263,3 +275,146 @@ def test_bad_numbers_are_usage_errors(argv: list[str], capsys: pytest.CaptureFix
         coral_run(["fuzz", RACY, *argv])
     assert exc.value.code == 2
     assert "Traceback" not in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- coverage
+
+
+@pytest.fixture(scope="module")
+def pool_fuzz() -> FuzzReport:
+    """Two runs of the pool mission over the LAN: every reply as a healthy vehicle gives."""
+    pool = mission("pool")
+    return fuzz(pool.net, pool.approval, FuzzOptions(runs=2, seed=0, link=BUILTIN_PROFILES["lan"]))
+
+
+def test_a_run_counts_the_transitions_its_events_fired() -> None:
+    pool = mission("pool")
+    options = FuzzOptions(runs=1, seed=4, link=BUILTIN_PROFILES["lan"])
+    run = run_one(pool.net, pool.approval, 4, options, keep_events=True)
+    fires = Counter(e.data["transition"] for e in run.events if e.kind == "fire")
+    assert dict(run.fired) == dict(fires) and fires
+    assert run.events_digest == events_digest(run.events)
+    lean = run_one(pool.net, pool.approval, 4, options)
+    assert lean.events == () and lean.fired == run.fired
+    assert lean.events_digest == run.events_digest
+    assert lean.to_json()["transitions_fired"] == len(run.fired)
+
+
+def test_coverage_adds_up(pool_fuzz: FuzzReport) -> None:
+    net = mission("pool").net
+    coverage = pool_fuzz.coverage()
+    assert coverage is not None
+    names = [t.name for t in net.transitions]
+    assert coverage.transitions == len(names)
+    assert 0 < coverage.exercised < coverage.transitions
+    assert set(coverage.fired) <= set(names)
+    assert [n.transition for n in coverage.never] == [n for n in names if n not in coverage.fired]
+    for name, count in coverage.fired.items():
+        assert count == sum(run.fired.get(name, 0) for run in pool_fuzz.runs) > 0
+    # Reply transitions fire too: the replies the simulator gave, and only those.
+    assert {"initialise.done", "check_depth.done", "fix_position.done"} <= set(coverage.fired)
+    assert any(net.transition(n).kind is TransitionKind.REPLY for n in coverage.fired)
+    assert f"{100.0 * coverage.share:.1f}" == f"{100.0 * coverage.exercised / len(names):.1f}"
+
+
+def test_never_fired_transitions_name_their_line_command_and_reply(pool_fuzz: FuzzReport) -> None:
+    net = mission("pool").net
+    coverage = pool_fuzz.coverage()
+    assert coverage is not None
+    never = {n.transition: n for n in coverage.never}
+    span = net.transition("check_depth.timeout").span
+    assert span is not None
+    assert never["check_depth.timeout"] == NeverFired(
+        "check_depth.timeout", f"{span.file}:{span.line}", "DEPTH?", "timeout"
+    )
+    assert never["depth_branch_failed"].command is None
+    assert never["depth_branch_failed"].reply is None
+    assert never["depth_branch_failed"].line is not None
+    assert never["depth_branch_failed"].line.endswith("go_to_operating_site.coral:46")
+    data = json.loads(json.dumps(pool_fuzz.to_json()))["coverage"]
+    assert data["transitions"] == coverage.transitions
+    assert data["exercised"] == coverage.exercised == len(data["fired"])
+    assert data["fired"] == dict(coverage.fired)
+    assert [n["transition"] for n in data["never"]] == [n.transition for n in coverage.never]
+    assert {"transition", "line", "command", "reply"} == set(data["never"][0])
+
+
+def test_the_text_report_lists_never_fired_transitions_with_their_lines(
+    pool_fuzz: FuzzReport,
+) -> None:
+    coverage = pool_fuzz.coverage()
+    assert coverage is not None
+    text = format_report(pool_fuzz, "coverage.coral")
+    assert (
+        f"coverage: exercised {coverage.exercised} of {coverage.transitions} transitions "
+        f"({100.0 * coverage.share:.1f} %)"
+    ) in text
+    shown = [line.split() for line in text.splitlines() if line.startswith("    ")]
+    rows = {words[0]: words for words in shown}
+    for never in coverage.never[:NEVER_SHOWN]:
+        assert rows[never.transition][1] == never.line
+        if never.reply is not None:
+            assert rows[never.transition][2:] == [str(never.command), "replied", never.reply]
+    for name in coverage.fired:
+        assert name not in rows
+    assert "reply fuzzing" in text
+    hidden = len(coverage.never) - NEVER_SHOWN
+    assert (f"... and {hidden} more in {REPORT_JSON}" in text) == (hidden > 0)
+
+
+def test_the_text_report_caps_the_list_and_json_keeps_it_all() -> None:
+    net = mission("pool").net
+    options = FuzzOptions(runs=0, seed=0, link=BUILTIN_PROFILES["lan"])
+    report = FuzzReport("pool_mission", POOL, options, [], 0.0, net=net)
+    text = format_report(report, "x")
+    assert f"exercised 0 of {len(net.transitions)} transitions (0.0 %)" in text
+    assert f"... and {len(net.transitions) - NEVER_SHOWN} more in {REPORT_JSON}" in text
+    assert len(report.to_json()["coverage"]["never"]) == len(net.transitions)  # type: ignore[index]
+
+
+def test_a_report_without_its_net_has_no_coverage() -> None:
+    options = FuzzOptions(runs=0, seed=0, link=BUILTIN_PROFILES["lan"])
+    report = FuzzReport("m", "m.coral", options, [], 0.0)
+    assert report.coverage() is None and report.to_json()["coverage"] is None
+    assert "coverage" not in format_report(report, "x")
+    full = Coverage.of(mission("racy").net, [])
+    assert full.exercised == 0 and full.share == 0.0
+
+
+# --------------------------------------------------------------------------- any vehicle
+
+
+def test_reply_fuzzing_a_second_vehicle_exercises_more_of_its_net(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """MINNOW by its profile, against the generic vehicle: a healthy vehicle flies the
+    main path only; with --vary-replies the abort paths run too, each to a declared
+    final marking (the survey mission is verified: any reply is handled)."""
+    survey = EXAMPLES / "survey_auv" / "survey.coral"
+    minnow = EXAMPLES / "profiles" / "minnow.yaml"
+    base = [str(survey), "--profile", str(minnow), "--unverified", "-q", "--no-plot"]
+    base += ["--runs", "12", "--link", "lan"]
+    healthy_out, varied_out = tmp_path / "healthy", tmp_path / "varied"
+    assert cli([*base, "--out", str(healthy_out)], capsys)[0] == 0
+    code, out, _ = cli([*base, "--vary-replies", "0.3", "--out", str(varied_out)], capsys)
+    assert code == 0, out
+    healthy = json.loads((healthy_out / "fuzz-report.json").read_text())
+    varied = json.loads((varied_out / "fuzz-report.json").read_text())
+    assert {r["end"] for r in varied["runs"]} == {"final"}
+    assert {tuple(r["marking"]) for r in healthy["runs"]} == {("survey_complete",)}
+    assert len({tuple(r["marking"]) for r in varied["runs"]}) >= 2
+    assert varied["coverage"]["exercised"] > healthy["coverage"]["exercised"]
+    never = {n["transition"] for n in healthy["coverage"]["never"]}
+    assert {"first_fix.timeout", "end_line1.error"} <= never
+    assert varied["faults"] == "*=any@0.3" and healthy["faults"] is None
+    assert varied["vehicle"] == "MINNOW"
+
+
+def test_a_fault_rule_that_does_not_fit_the_profile_is_bad_input(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, _, err = cli(
+        [RACY, "--unverified", "--fault", "DEPTH=timeout", "--out", str(tmp_path)], capsys
+    )
+    assert code == 2 and "DEPTH" in err and "Traceback" not in err
+    assert not (tmp_path / "fuzz-report.json").exists()

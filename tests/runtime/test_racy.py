@@ -31,6 +31,7 @@ from hypothesis.errors import NoSuchExample
 
 from analysis.cli import main as coral_check
 from romeo_sim.config import VehicleConfig, default_config
+from romeo_sim.vehicle import Vehicle
 from runtime.controller import RunEnd
 from runtime.engine import Outcome, Policy
 from runtime.fuzz import FuzzOptions, run_one
@@ -66,6 +67,11 @@ def heading_at_90() -> VehicleConfig:
     """ROMEO already facing 90 degrees, as the racy mission's author assumed."""
     config = default_config()
     return dataclasses.replace(config, initial=dataclasses.replace(config.initial, psi_deg=90.0))
+
+
+def romeo_facing_90(seed: int) -> Vehicle:
+    """The simulated ROMEO of `heading_at_90`, for `FuzzOptions.vehicle_factory`."""
+    return Vehicle(heading_at_90(), seed=seed)
 
 
 @pytest.fixture(scope="module")
@@ -167,7 +173,7 @@ def test_the_race_shows_in_the_simulator_over_a_hostile_link() -> None:
         runs=1,
         seed=HOSTILE_RACE_SEED,
         link=BUILTIN_PROFILES["hostile"],
-        vehicle_config=heading_at_90(),
+        vehicle_factory=romeo_facing_90,
     )
     result = run_one(racy.net, racy.approval, HOSTILE_RACE_SEED, options, keep_events=True)
     assert result.end is RunEnd.DEADLOCK
@@ -194,7 +200,7 @@ def test_the_pool_mission_never_fails_in_the_simulator_where_the_racy_one_does(
     pool = mission("pool")
     for seed in range(HOSTILE_RACE_SEED - 2, HOSTILE_RACE_SEED + 2):
         options = FuzzOptions(
-            runs=1, seed=seed, link=BUILTIN_PROFILES[profile], vehicle_config=heading_at_90()
+            runs=1, seed=seed, link=BUILTIN_PROFILES[profile], vehicle_factory=romeo_facing_90
         )
         result = run_one(pool.net, pool.approval, seed, options, keep_events=True)
         check_run("pool", result)

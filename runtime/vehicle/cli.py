@@ -1,0 +1,171 @@
+"""``coral-vehicle``: serve a simulated vehicle for any profile on the coral wire protocol.
+
+``coral-vehicle serve --profile minnow.yaml --key-file KEY`` serves the vehicle of that
+profile (the simulator made for it, else the generic one) to a controller, on localhost
+by default, until Ctrl-C or ``--duration``; it prints ``listening on HOST:PORT`` first.
+``--fault``/``--faults`` force replies to rehearse failures (``docs/vehicles.md``).
+``coral-vehicle list`` prints the registered simulators.
+
+Exit codes: 0 after a clean stop; 1 the address cannot be bound; 2 bad usage or input
+(a profile, key, fault plan or simulator that cannot be used).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from coral_lang.diagnostics import CoralError
+from coral_lang.profile import VehicleProfile, load_bundled_profile, load_profile
+from runtime.vehicle.model import VehicleModel
+from runtime.vehicle.options import add_simulation_arguments, fault_plan_from_args
+
+__all__ = ["build_parser", "main"]
+
+EXIT_OK = 0
+EXIT_BIND = 1
+EXIT_USAGE = 2
+
+
+def _finite(text: str, *, positive: bool) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value) or value < 0.0 or (positive and value == 0.0):
+        kind = "positive" if positive else "non-negative"
+        raise argparse.ArgumentTypeError(f"expected a {kind} number, got {text!r}")
+    return value
+
+
+def _port(text: str) -> int:
+    if not text.isdigit() or not 0 <= int(text) <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port in 0..65535, got {text!r}")
+    return int(text)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``coral-vehicle``."""
+    parser = argparse.ArgumentParser(
+        prog="coral-vehicle",
+        description="Serve a simulated vehicle for any vehicle profile on the coral wire "
+        "protocol, with faults on request, so a mission can be rehearsed over real sockets.",
+        epilog="exit codes: 0 clean stop, 1 cannot bind the address, 2 bad usage or input",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    commands.add_parser("list", help="list the registered simulators")
+    serve = commands.add_parser(
+        "serve",
+        help="serve a simulated vehicle to a controller",
+        description="Serve a simulated vehicle on TCP (handshake, commands, replies; one "
+        "controller at a time, a reconnecting one resumes its mission) and UDP telemetry. "
+        "Prints 'listening on HOST:PORT' when ready.",
+    )
+    which = serve.add_mutually_exclusive_group(required=True)
+    which.add_argument("--profile", type=Path, metavar="FILE", help="the vehicle profile (YAML)")
+    which.add_argument("--vehicle", metavar="NAME", help="a bundled profile by name (ROMEO)")
+    serve.add_argument("--host", default="127.0.0.1", help="address to listen on (127.0.0.1)")
+    serve.add_argument("--port", type=_port, default=0, help="TCP port; 0 picks one (default)")
+    key = serve.add_mutually_exclusive_group()
+    key.add_argument("--key-file", type=Path, metavar="FILE", help="pre-shared key, hex text")
+    key.add_argument("--key-hex", metavar="HEX", help="pre-shared key on the command line (tests)")
+    serve.add_argument("--seed", type=int, default=0, help="seed of the simulated vehicle")
+    serve.add_argument(
+        "--speed",
+        type=lambda t: _finite(t, positive=True),
+        default=1.0,
+        metavar="FACTOR",
+        help="vehicle seconds per wall second (default 1)",
+    )
+    serve.add_argument(
+        "--duration",
+        type=lambda t: _finite(t, positive=False),
+        default=None,
+        metavar="SECONDS",
+        help="stop after this many wall seconds (default: until Ctrl-C)",
+    )
+    serve.add_argument(
+        "--log", type=Path, metavar="FILE", help="write the vehicle's event log (SQLite) here"
+    )
+    add_simulation_arguments(serve)
+    return parser
+
+
+def _profile(args: argparse.Namespace) -> VehicleProfile:
+    if args.profile is not None:
+        return load_profile(args.profile)
+    return load_bundled_profile(str(args.vehicle))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return EXIT_OK if exc.code == 0 else EXIT_USAGE
+    from runtime.vehicle.registry import simulators
+
+    if args.command == "list":
+        for name, target in sorted(simulators().items()):
+            print(f"{name:10} {target}")
+        return EXIT_OK
+    from runtime.keys import load_psk
+    from runtime.vehicle.registry import create_vehicle
+
+    try:
+        key = load_psk(args.key_file, args.key_hex, who="coral-vehicle serve")
+        profile = _profile(args)
+        plan = fault_plan_from_args(args)
+        model = create_vehicle(
+            profile, simulator=args.simulator, seed=args.seed, config=args.sim_config, faults=plan
+        )
+    except (CoralError, OSError) as exc:
+        print(f"coral-vehicle: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    return _serve(args, key, profile, model)
+
+
+def _serve(
+    args: argparse.Namespace, key: bytes, profile: VehicleProfile, model: VehicleModel
+) -> int:
+    from runtime.eventlog import EventLog
+    from runtime.vehicle.server import run_vehicle
+
+    def log(line: str) -> None:
+        print(f"coral-vehicle: {line}", file=sys.stderr, flush=True)
+
+    event_log = None
+    if args.log is not None:
+        try:
+            event_log = EventLog.create(
+                args.log,
+                role="vehicle",
+                mission=profile.name,
+                meta={"seed": args.seed, "speed": args.speed, "profile": profile.file},
+            )
+        except CoralError as exc:
+            log(str(exc))
+            return EXIT_USAGE
+    log(f"{profile.name} ({type(model).__name__}), speed {args.speed:g}")
+    try:
+        return run_vehicle(
+            model,
+            key,
+            host=args.host,
+            port=args.port,
+            speed=args.speed,
+            duration=args.duration,
+            event_log=event_log,
+            log=log,
+        )
+    finally:
+        if event_log is not None:
+            event_log.close()
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,715 @@
+"""Any `VehicleModel` served on the coral wire protocol: what puts a vehicle on the wire.
+
+`VehicleServer` puts a model (ROMEO's simulator, the generic simulated vehicle, an
+integrator's `runtime.vehicle.handlers.HandlerVehicle` on real hardware) behind a TCP
+listener (handshake, commands, replies, reply acknowledgements, heartbeats) and sends its
+telemetry by UDP, exactly as ``docs/protocol.md`` describes the vehicle's side. Written
+once, here, so that every vehicle gets the same authentication, the same exactly-once
+reply ledger and the same resume rules; a vehicle only has to be a model. It owns no clock
+and no randomness of its own: the wall clock, the nonce source and the log are
+parameters, so tests can drive it.
+
+How it behaves:
+
+* One controller at a time. A new connection is taken as the controller only once
+  `StreamCodec.peer_verified` is True (its first session frame); then the previous
+  connection, if any, is closed and the new one's ``Hello`` resume request is applied.
+* Every command id runs once per mission (`ReplyLedger`); a repeat re-sends the replies
+  still unacknowledged for it. Replies are kept until a `ReplyAck` (or a resuming
+  ``Hello``'s ``last_reply_seq``) covers them, and re-sent after a resume.
+* The vehicle's command ids are the server's own, numbered 1, 2, 3... across missions, so a
+  new mission may reuse the wire ids of an old one without the vehicle mistaking them for
+  repeats.
+* A stepping task advances the vehicle by the wall-clock time elapsed times ``speed``;
+  every frame from the controller first brings the vehicle up to date, so a command is
+  stamped with the right vehicle time. Telemetry samples are taken every
+  ``1 / telemetry_hz`` seconds of *vehicle* time; a model whose `VehicleModel.telemetry`
+  returns None at that moment gives neither a datagram nor a sample.
+* Rejected input is counted and logged; the connection and the vehicle go on.
+* Without sockets (`start_detached` and `accept`), an in-memory link such as
+  `runtime.memorylink.MemoryLink` hands the server its connections and receives the
+  telemetry, so the same server runs under a virtual clock.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Generic
+
+from runtime.eventlog import EventLog, TelemetrySample
+from runtime.protocol import (
+    MAX_DETAIL_BYTES,
+    MIN_KEY_SIZE,
+    NONCE_SIZE,
+    Command,
+    Heartbeat,
+    Hello,
+    HelloReply,
+    ProtocolError,
+    Rejected,
+    ReplyAck,
+    ReplyLedger,
+    Role,
+    StreamCodec,
+    StreamMessage,
+    Telemetry,
+    encode_datagram,
+)
+from runtime.vehicle.model import Reply, TelemetrySnapshot, VehicleModel
+
+__all__ = ["ServerStats", "VehicleServer", "run_vehicle", "serve_vehicle"]
+
+if TYPE_CHECKING:
+    from typing_extensions import TypeVar
+
+    M = TypeVar("M", bound=VehicleModel, covariant=True, default=VehicleModel)
+else:  # the default is for type checkers only (typing.TypeVar takes it from 3.13)
+    from typing import TypeVar
+
+    M = TypeVar("M", bound=VehicleModel, covariant=True)
+"""The model a server serves. ``VehicleServer(romeo)`` is a ``VehicleServer[Vehicle]``, so
+``server.vehicle`` keeps ROMEO's own methods for its callers; a bare ``VehicleServer``
+annotation means any model."""
+
+Clock = Callable[[], float]
+"""A monotonic clock in seconds (wall time in production, a fake one in tests)."""
+
+DatagramSink = Callable[[bytes, tuple[str, int]], None]
+"""Where an in-memory connection's telemetry goes: (datagram, (host, port))."""
+
+
+def _stderr(line: str) -> None:
+    print(f"vehicle server: {line}", file=sys.stderr, flush=True)
+
+
+@dataclass
+class ServerStats:
+    """Counters of one server run, for the log and the tests.
+
+    Attributes:
+        connections: TCP connections accepted.
+        adopted: connections that became the controller (after their first session frame).
+        commands: commands carried out (each command id of a mission once).
+        repeats: commands received again with an id already carried out.
+        replies: replies issued (not counting re-sends).
+        resent: replies sent again (after a resume or a repeated command).
+        rejected: frames the codec rejected (bad tag, replay, malformed...), all connections.
+        datagrams: telemetry datagrams sent.
+    """
+
+    connections: int = 0
+    adopted: int = 0
+    commands: int = 0
+    repeats: int = 0
+    replies: int = 0
+    resent: int = 0
+    rejected: int = 0
+    datagrams: int = 0
+
+    def summary(self) -> str:
+        """One line for the log."""
+        return (
+            f"{self.connections} connections ({self.adopted} adopted), {self.commands} "
+            f"commands ({self.repeats} repeats), {self.replies} replies ({self.resent} re-sent), "
+            f"{self.datagrams} telemetry datagrams, {self.rejected} frames rejected"
+        )
+
+
+@dataclass(eq=False)
+class _Connection:
+    """One accepted TCP connection and its codec."""
+
+    codec: StreamCodec
+    writer: asyncio.StreamWriter
+    peer: str
+    peer_host: str
+    hello: Hello | None = None
+    announced_resume: bool = False
+    adopted: bool = False
+    last_sent: float = 0.0
+    telemetry_seq: int = 0
+    closed: bool = field(default=False)
+    sink: DatagramSink | None = None
+
+    def send(self, msg: StreamMessage, now: float) -> None:
+        if self.closed or self.writer.is_closing():
+            return
+        self.writer.write(self.codec.encode(msg))
+        self.last_sent = now
+
+    def close(self) -> None:
+        self.closed = True
+        if not self.writer.is_closing():
+            self.writer.close()
+
+
+class VehicleServer(Generic[M]):
+    """A `VehicleModel` served on the coral wire protocol: TCP for the stream, UDP for telemetry.
+
+    Args:
+        vehicle: the vehicle model (simulated, or an adapter to real hardware); the server
+            is the only thing that should drive it while it runs.
+        psk: the pre-shared key, at least `MIN_KEY_SIZE` bytes.
+        host: address to listen on (TCP) and send telemetry from (UDP).
+        port: TCP port; 0 picks a free one (`start` returns it).
+        clock: monotonic wall clock in seconds; ``time.monotonic`` in production.
+        speed: vehicle seconds per wall second (1.0: real time; 50.0: fifty times faster).
+        telemetry_hz: telemetry samples per second of vehicle time.
+        tick: wall seconds between steps of the stepping task.
+        heartbeat_interval: wall seconds of silence towards the controller after which the
+            server sends a `Heartbeat`.
+        handshake_timeout: wall seconds a new connection may take to prove it is live (its
+            first session frame) before it is closed.
+        nonces: source of random bytes for the handshake nonces; ``os.urandom`` by default.
+        log: receives one line per notable event (rejections, connections); stderr by
+            default.
+        event_log: the vehicle's side of the run's record (``docs/eventlog.md``): every
+            command received, reply issued and telemetry sample, on the vehicle clock;
+            committed about once a second and at `stop`. None: no record.
+
+    Raises:
+        ValueError: a key shorter than `MIN_KEY_SIZE`, or a speed, rate or interval that is
+            not a positive finite number.
+    """
+
+    def __init__(
+        self,
+        vehicle: M,
+        psk: bytes,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        clock: Clock = time.monotonic,
+        speed: float = 1.0,
+        telemetry_hz: float = 2.0,
+        tick: float = 0.05,
+        heartbeat_interval: float = 1.0,
+        handshake_timeout: float = 10.0,
+        nonces: Callable[[int], bytes] = os.urandom,
+        log: Callable[[str], None] = _stderr,
+        event_log: EventLog | None = None,
+    ) -> None:
+        if not isinstance(psk, bytes | bytearray) or len(psk) < MIN_KEY_SIZE:
+            raise ValueError(
+                f"the pre-shared key must be at least {MIN_KEY_SIZE} bytes "
+                "(use 32 random bytes, e.g. secrets.token_hex(32))"
+            )
+        for name, value in (
+            ("speed", speed),
+            ("telemetry_hz", telemetry_hz),
+            ("tick", tick),
+            ("heartbeat_interval", heartbeat_interval),
+            ("handshake_timeout", handshake_timeout),
+        ):
+            if not math.isfinite(value) or value <= 0.0:
+                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+        self.vehicle = vehicle
+        self._psk = bytes(psk)
+        self._host = host
+        self._port = port
+        self._clock = clock
+        self.speed = float(speed)
+        self._telemetry_period = 1.0 / telemetry_hz
+        self._tick = tick
+        self._heartbeat_interval = heartbeat_interval
+        self._handshake_timeout = handshake_timeout
+        self._nonces = nonces
+        self._log = log
+        self._events = event_log
+        self._samples = 0
+        self._last_commit = 0.0
+        self.stats = ServerStats()
+        self.ledger: ReplyLedger | None = None
+        """The current mission's ledger; None until a controller's Hello is adopted."""
+        self._active: _Connection | None = None
+        self._connections: set[_Connection] = set()
+        self._handlers: set[asyncio.Task[None]] = set()
+        # Vehicle-side command id -> (the ledger it belongs to, the wire command id).
+        self._origin: dict[int, tuple[ReplyLedger, int]] = {}
+        self._next_vehicle_id = 1
+        self._server: asyncio.Server | None = None
+        self._udp: asyncio.DatagramTransport | None = None
+        self._stepper: asyncio.Task[None] | None = None
+        self._last_wall = 0.0
+        self._next_sample = vehicle.time
+        self._address: tuple[str, int] | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+
+    @property
+    def address(self) -> tuple[str, int] | None:
+        """The bound TCP (host, port) once started, else None."""
+        return self._address
+
+    @property
+    def silence_timeout(self) -> float:
+        """The vehicle's watchdog in wall seconds (reported in `HelloReply`).
+
+        The watchdog counts vehicle seconds; the controller counts wall seconds, so at
+        ``speed`` 50 a 30-s watchdog is 0.6 s for the controller.
+        """
+        return self.vehicle.watchdog_s / self.speed
+
+    @property
+    def controller(self) -> str | None:
+        """The address of the current controller connection, None if there is none."""
+        return None if self._active is None else self._active.peer
+
+    async def start(self) -> tuple[str, int]:
+        """Listen, open the telemetry socket and start stepping the vehicle.
+
+        Returns:
+            The bound TCP (host, port); with ``port=0``, the port the system picked.
+
+        Raises:
+            RuntimeError: the server was already started.
+            OSError: the address cannot be bound.
+        """
+        if self._server is not None or self._stepper is not None:
+            raise RuntimeError("VehicleServer.start() called twice")
+        loop = asyncio.get_running_loop()
+        self._server = await asyncio.start_server(self._on_connect, self._host, self._port)
+        sock = self._server.sockets[0].getsockname()
+        self._address = (str(sock[0]), int(sock[1]))
+        udp, _ = await loop.create_datagram_endpoint(
+            asyncio.DatagramProtocol, local_addr=(self._host, 0)
+        )
+        self._udp = udp
+        self._start_stepping()
+        return self._address
+
+    async def start_detached(self) -> None:
+        """Start stepping the vehicle without opening any socket.
+
+        For in-memory links (a virtual-time run has no sockets): connections come through
+        `accept`, and each one's telemetry goes to the sink given there. Does nothing if
+        the server already runs (`start` or `start_detached`); `stop` stops it.
+        """
+        if self._stepper is None:
+            self._start_stepping()
+
+    def _start_stepping(self) -> None:
+        self._last_wall = self._clock()
+        self._next_sample = self.vehicle.time
+        self._stepper = asyncio.create_task(self._step_loop(), name="vehicle server stepper")
+
+    async def stop(self) -> None:
+        """Close every connection, stop stepping, release the sockets. Safe to call twice."""
+        if self._stepper is not None:
+            self._stepper.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._stepper
+            self._stepper = None
+        if self._server is not None:
+            self._server.close()
+        for conn in list(self._connections):
+            conn.close()
+        for task in list(self._handlers):
+            task.cancel()
+        if self._handlers:
+            await asyncio.gather(*self._handlers, return_exceptions=True)
+        self._commit_record(force=True)
+        if self._server is not None:
+            with contextlib.suppress(OSError):
+                await self._server.wait_closed()
+            self._server = None
+        if self._udp is not None:
+            self._udp.close()
+            self._udp = None
+        self._active = None
+
+    async def __aenter__(self) -> VehicleServer[M]:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    # ------------------------------------------------------------------ vehicle time
+
+    def catch_up(self) -> None:
+        """Advance the vehicle to the present (wall time elapsed x speed); send what fell due.
+
+        Telemetry samples are taken on the way, every ``1 / telemetry_hz`` vehicle seconds.
+        """
+        now = self._clock()
+        elapsed = max(0.0, now - self._last_wall)
+        self._last_wall = now
+        target = self.vehicle.time + elapsed * self.speed
+        replies: list[Reply] = []
+        while self._next_sample <= target:
+            replies += self.vehicle.advance_to(max(self._next_sample, self.vehicle.time))
+            snapshot = self.vehicle.telemetry()
+            if snapshot is not None:
+                self._record_sample(snapshot)
+                self._send_telemetry(snapshot)
+            self._next_sample += self._telemetry_period
+        replies += self.vehicle.advance_to(target)
+        self._issue(replies)
+
+    async def _step_loop(self) -> None:
+        while True:
+            self.catch_up()
+            active = self._active
+            if active is not None and not active.closed:
+                now = self._clock()
+                if now - active.last_sent >= self._heartbeat_interval:
+                    active.send(Heartbeat(self.vehicle.time), now)
+            self._commit_record()
+            await asyncio.sleep(self._tick)
+
+    def _record_sample(self, t: TelemetrySnapshot) -> None:
+        if self._events is None:
+            return
+        self._samples += 1
+        self._events.telemetry(
+            TelemetrySample(t.time, self._samples, t.x, t.y, t.z, t.psi, t.x_est, t.y_est)
+        )
+
+    def _record(self, what: str, /, **data: object) -> None:
+        if self._events is not None:
+            self._events.event(self.vehicle.time, what, **data)
+
+    def _commit_record(self, *, force: bool = False) -> None:
+        now = self._clock()
+        if self._events is not None and (force or now - self._last_commit >= 1.0):
+            self._last_commit = now
+            self._events.commit()
+
+    def _send_telemetry(self, t: TelemetrySnapshot) -> None:
+        conn = self._active
+        if conn is None or conn.closed or conn.hello is None:
+            return
+        if conn.sink is None and self._udp is None:
+            return
+        port = conn.hello.telemetry_port
+        key = conn.codec.session_key
+        if port == 0 or key is None:
+            return
+        conn.telemetry_seq += 1
+        try:
+            datagram = encode_datagram(
+                key, Telemetry(conn.telemetry_seq, t.time, t.x, t.y, t.z, t.psi, t.x_est, t.y_est)
+            )
+        except ProtocolError as exc:  # a non-finite state: a bug in the model
+            self._log(f"telemetry not sent: {exc}")
+            return
+        if conn.sink is not None:
+            conn.sink(datagram, (conn.peer_host, port))
+        elif self._udp is not None:
+            self._udp.sendto(datagram, (conn.peer_host, port))
+        self.stats.datagrams += 1
+
+    # ------------------------------------------------------------------ replies
+
+    def _issue(self, replies: list[Reply]) -> None:
+        """Number the vehicle's replies in the mission's ledger and send them."""
+        for reply in replies:
+            origin = self._origin.get(reply.command_id)
+            if origin is None or origin[0] is not self.ledger:
+                continue  # the vehicle's own (watchdog) or an abandoned mission's command
+            ledger, wire_id = origin
+            wire = ledger.issue(wire_id, reply.kind, reply.time, _clip(reply.detail))
+            self.stats.replies += 1
+            self._record(
+                "reply-issued",
+                command_id=wire_id,
+                reply_seq=wire.reply_seq,
+                kind=wire.kind,
+                detail=wire.detail,
+            )
+            self._send_to_controller(wire)
+
+    def _send_to_controller(self, msg: StreamMessage) -> None:
+        conn = self._active
+        if conn is not None and not conn.closed:
+            conn.send(msg, self._clock())
+
+    # ------------------------------------------------------------------ connections
+
+    async def accept(
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        *,
+        peer: tuple[str, int],
+        datagram_sink: DatagramSink | None = None,
+    ) -> None:
+        """Serve one connection that did not come through the TCP listener; return when it ends.
+
+        For in-memory links: ``reader`` and ``writer`` are the connection's two streams,
+        ``peer`` names the controller in the log, and the connection's telemetry goes to
+        ``datagram_sink(datagram, (peer host, announced port))`` (to the UDP socket, if
+        the server has one, when None).
+        """
+        await self._serve_connection(reader, writer, peer, datagram_sink)
+
+    async def _on_connect(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await self._serve_connection(reader, writer, writer.get_extra_info("peername"), None)
+
+    async def _serve_connection(
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        peer: object,
+        sink: DatagramSink | None,
+    ) -> None:
+        task = asyncio.current_task()
+        if task is not None:
+            self._handlers.add(task)
+        conn = _Connection(
+            StreamCodec(self._psk, Role.VEHICLE, self._nonces(NONCE_SIZE)),
+            writer,
+            f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer),
+            str(peer[0]) if isinstance(peer, tuple) else self._host,
+            sink=sink,
+        )
+        self._connections.add(conn)
+        self.stats.connections += 1
+        self._log(f"connection from {conn.peer}")
+        try:
+            await self._serve(conn, reader)
+        except (ConnectionError, OSError) as exc:
+            self._log(f"connection {conn.peer}: {exc}")
+        finally:
+            conn.close()
+            self._connections.discard(conn)
+            if self._active is conn:
+                self._active = None
+                self._log(f"controller {conn.peer} disconnected; replies kept until resumed")
+            if task is not None:
+                self._handlers.discard(task)
+
+    async def _serve(self, conn: _Connection, reader: asyncio.StreamReader) -> None:
+        while not conn.closed:
+            if conn.adopted:
+                data = await reader.read(4096)
+            else:
+                try:
+                    data = await asyncio.wait_for(reader.read(4096), self._handshake_timeout)
+                except TimeoutError:
+                    self._log(f"connection {conn.peer}: no verified frame in time; closing")
+                    return
+            if not data:
+                return
+            self.catch_up()
+            for item in conn.codec.feed(data):
+                if conn.closed:
+                    return
+                if isinstance(item, Rejected):
+                    self.stats.rejected += 1
+                    self._log(f"rejected from {conn.peer}: {item.reason.value}: {item.detail}")
+                elif isinstance(item, Hello):
+                    self._on_hello(conn, item)
+                # The first session frame proves the connection live (even an authentic
+                # frame that fails later checks): only then is it the controller.
+                if not conn.adopted and conn.hello is not None and conn.codec.peer_verified:
+                    self._adopt(conn)
+                if conn.adopted and not isinstance(item, Rejected | Hello):
+                    self._on_session(conn, item)
+            with contextlib.suppress(ConnectionError):
+                await conn.writer.drain()
+
+    def _on_hello(self, conn: _Connection, hello: Hello) -> None:
+        received_at = self.vehicle.time
+        resumed = self._can_resume(hello)
+        last = self.ledger.last_reply_seq if resumed and self.ledger is not None else 0
+        conn.hello = hello
+        conn.announced_resume = resumed
+        conn.send(
+            HelloReply(
+                hello.nonce,
+                conn.codec.nonce,
+                received_at,
+                self.vehicle.time,
+                resumed,
+                last,
+                self.silence_timeout,
+            ),
+            self._clock(),
+        )
+
+    def _can_resume(self, hello: Hello) -> bool:
+        return (
+            hello.resume and self.ledger is not None and self.ledger.mission_id == hello.mission_id
+        )
+
+    def _adopt(self, conn: _Connection) -> None:
+        """Make a verified connection the controller and apply its Hello."""
+        hello = conn.hello
+        assert hello is not None
+        if self._can_resume(hello) != conn.announced_resume:
+            # Another controller changed the mission between this Hello and now.
+            self._log(f"connection {conn.peer}: mission changed during the handshake; closing")
+            conn.close()
+            return
+        old = self._active
+        if old is not None and old is not conn:
+            self._log(f"controller {old.peer} replaced by {conn.peer}")
+            old.close()
+        self._active = conn
+        conn.adopted = True
+        self.stats.adopted += 1
+        self._record(
+            "adopt", peer=conn.peer, mission_id=hello.mission_id, resumed=conn.announced_resume
+        )
+        self.vehicle.heard_from_controller()
+        if conn.announced_resume:
+            assert self.ledger is not None
+            self.ledger.acknowledge(hello.last_reply_seq)
+            pending = self.ledger.unacknowledged(hello.last_reply_seq)
+            self._log(
+                f"controller {conn.peer} resumed mission {hello.mission_id}; "
+                f"re-sending {len(pending)} replies"
+            )
+            for reply in pending:
+                self.stats.resent += 1
+                conn.send(reply, self._clock())
+        else:
+            self.ledger = ReplyLedger(hello.mission_id)
+            self._origin.clear()
+            what = "could not resume" if hello.resume else "starts"
+            self._log(f"controller {conn.peer} {what} mission {hello.mission_id}")
+
+    def _on_session(self, conn: _Connection, msg: StreamMessage) -> None:
+        if conn is not self._active or self.ledger is None:
+            return
+        self.vehicle.heard_from_controller()
+        if isinstance(msg, Command):
+            self._on_command(conn, msg)
+        elif isinstance(msg, ReplyAck):
+            self.ledger.acknowledge(msg.reply_seq)
+        # Heartbeat: hearing from the controller is all it does.
+
+    def _on_command(self, conn: _Connection, cmd: Command) -> None:
+        ledger = self.ledger
+        assert ledger is not None
+        first = ledger.first_time(cmd.command_id)
+        self._record(
+            "command-received",
+            command_id=cmd.command_id,
+            name=cmd.name,
+            params=dict(cmd.params),
+            repeat=not first,
+        )
+        if not first:
+            self.stats.repeats += 1
+            for reply in ledger.replies_for(cmd.command_id):
+                self.stats.resent += 1
+                conn.send(reply, self._clock())
+            return
+        vehicle_id = self._next_vehicle_id
+        self._next_vehicle_id += 1
+        self._origin[vehicle_id] = (ledger, cmd.command_id)
+        self.stats.commands += 1
+        self._issue(self.vehicle.command(vehicle_id, cmd.name, cmd.params))
+        # Replies this command caused for other commands (a replaced task's queries): the
+        # model hands them out from its next advance, stamped with this command's time.
+        self._issue(self.vehicle.advance_to(self.vehicle.time))
+
+
+def _clip(detail: str) -> str:
+    """``detail`` cut to what a Reply frame carries (whole UTF-8 characters)."""
+    raw = detail.encode("utf-8")
+    if len(raw) <= MAX_DETAIL_BYTES:
+        return detail
+    return raw[: MAX_DETAIL_BYTES - 3].decode("utf-8", errors="ignore") + "..."
+
+
+async def serve_vehicle(
+    model: VehicleModel,
+    psk: bytes,
+    *,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    speed: float = 1.0,
+    duration: float | None = None,
+    event_log: EventLog | None = None,
+    log: Callable[[str], None] = _stderr,
+) -> ServerStats:
+    """Serve ``model`` on ``host:port`` until cancelled or ``duration`` wall seconds pass.
+
+    Prints ``listening on HOST:PORT`` to stdout once the socket is bound (with ``port=0``,
+    the port the system picked), so a script or a test can connect. Listens on localhost
+    unless told otherwise: a vehicle is exposed to the network only on purpose.
+
+    Returns:
+        The server's counters.
+
+    Raises:
+        ValueError: a key shorter than `MIN_KEY_SIZE` or a bad ``speed``.
+        OSError: the address cannot be bound.
+    """
+    server = VehicleServer(
+        model,
+        psk,
+        host=host,
+        port=port,
+        clock=time.monotonic,
+        speed=speed,
+        log=log,
+        event_log=event_log,
+    )
+    try:
+        bound_host, bound_port = await server.start()
+    except OSError:
+        await server.stop()
+        raise
+    print(f"listening on {bound_host}:{bound_port}", flush=True)
+    try:
+        if duration is None:
+            await asyncio.Event().wait()
+        else:
+            await asyncio.sleep(duration)
+    finally:
+        await server.stop()
+        log(f"stopped at vehicle time {model.time:.1f} s; {server.stats.summary()}")
+    return server.stats
+
+
+def run_vehicle(
+    model: VehicleModel,
+    psk: bytes,
+    *,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    speed: float = 1.0,
+    duration: float | None = None,
+    event_log: EventLog | None = None,
+    log: Callable[[str], None] = _stderr,
+) -> int:
+    """`serve_vehicle` from an integrator's ``main``: blocks until Ctrl-C or ``duration``.
+
+    Returns:
+        An exit code: 0 after a clean stop (Ctrl-C included), 1 when the address cannot be
+        bound, 2 for a bad key or speed; the reason goes to ``log``, never a traceback.
+    """
+    try:
+        asyncio.run(
+            serve_vehicle(
+                model,
+                psk,
+                host=host,
+                port=port,
+                speed=speed,
+                duration=duration,
+                event_log=event_log,
+                log=log,
+            )
+        )
+    except KeyboardInterrupt:
+        log("stopped (Ctrl-C)")
+    except ValueError as exc:
+        log(str(exc))
+        return 2
+    except OSError as exc:
+        log(f"cannot listen on {host}:{port}: {exc}")
+        return 1
+    return 0
