@@ -25,7 +25,16 @@ How it behaves:
   stamped with the right vehicle time. Telemetry samples are taken every
   ``1 / telemetry_hz`` seconds of *vehicle* time; a model whose `VehicleModel.telemetry`
   returns None at that moment gives neither a datagram nor a sample.
-* Rejected input is counted and logged; the connection and the vehicle go on.
+* Rejected input is counted and logged; the connection and the vehicle go on. The log
+  is rate-limited (`_LogThrottle`): the first few lines of a kind from one host, then one
+  summary line per period, so a flood of garbage cannot flood the log.
+* A hostile or slow client cannot lock the controller out (``docs/protocol.md``, "Hostile
+  clients"): a connection not adopted within ``handshake_timeout`` seconds of being
+  accepted is closed however it trickles bytes, at most ``max_pending`` connections wait
+  unadopted (a new one closes the oldest, preferring one that sent no ``Hello``), a
+  pending connection sending more than ``max_pending_bytes`` is closed, and accept
+  failures (out of descriptors) are counted, logged rate-limited and retried. The adopted
+  controller is never counted against these limits.
 * Without sockets (`start_detached` and `accept`), an in-memory link such as
   `runtime.memorylink.MemoryLink` hands the server its connections and receives the
   telemetry, so the same server runs under a virtual clock.
@@ -37,6 +46,7 @@ import asyncio
 import contextlib
 import math
 import os
+import socket
 import sys
 import time
 from collections.abc import Callable
@@ -46,6 +56,7 @@ from typing import TYPE_CHECKING, Generic
 from runtime.eventlog import EventLog, TelemetrySample
 from runtime.protocol import (
     MAX_DETAIL_BYTES,
+    MAX_FRAME,
     MIN_KEY_SIZE,
     NONCE_SIZE,
     Command,
@@ -100,8 +111,13 @@ class ServerStats:
         repeats: commands received again with an id already carried out.
         replies: replies issued (not counting re-sends).
         resent: replies sent again (after a resume or a repeated command).
-        rejected: frames the codec rejected (bad tag, replay, malformed...), all connections.
+        rejected: frames the codec rejected (bad tag, replay, malformed...), all connections
+            (each connection's own count is its codec's ``rejected``).
         datagrams: telemetry datagrams sent.
+        timed_out: connections closed for not being adopted within ``handshake_timeout``.
+        evicted: pending connections closed to make room for a newer one (``max_pending``).
+        overflowed: pending connections closed for sending more than ``max_pending_bytes``.
+        accept_errors: failed accepts on the listening socket (e.g. out of descriptors).
     """
 
     connections: int = 0
@@ -112,14 +128,86 @@ class ServerStats:
     resent: int = 0
     rejected: int = 0
     datagrams: int = 0
+    timed_out: int = 0
+    evicted: int = 0
+    overflowed: int = 0
+    accept_errors: int = 0
 
     def summary(self) -> str:
-        """One line for the log."""
-        return (
+        """One line for the log (the hostile-client counters only when any is non-zero)."""
+        line = (
             f"{self.connections} connections ({self.adopted} adopted), {self.commands} "
             f"commands ({self.repeats} repeats), {self.replies} replies ({self.resent} re-sent), "
             f"{self.datagrams} telemetry datagrams, {self.rejected} frames rejected"
         )
+        if self.timed_out or self.evicted or self.overflowed or self.accept_errors:
+            line += (
+                f"; closed unadopted: {self.timed_out} timed out, {self.evicted} evicted, "
+                f"{self.overflowed} over the byte limit; {self.accept_errors} accept errors"
+            )
+        return line
+
+
+@dataclass
+class _Burst:
+    """One kind of log line from one source within the current period."""
+
+    started: float
+    shown: int = 0
+    suppressed: int = 0
+
+
+class _LogThrottle:
+    """The first ``burst`` lines of each kind per ``period`` go to the log; the rest are counted.
+
+    Why: the server logs events a peer causes (rejected frames, connections). Unthrottled,
+    a client sending garbage writes a line per two bytes it sends, and a connection flood
+    a line per attempt: the log becomes the attack. Each kind (e.g. "frames rejected from
+    10.0.0.5") gets ``burst`` lines per period; what was held back is reported as one
+    summary line, "N more frames rejected from 10.0.0.5 in the last S s", when the period
+    ends (`flush`, called by the server's stepping task, or the next line of that kind).
+    """
+
+    MAX_KINDS = 256
+    """Kinds tracked at once; beyond (a flood from many hosts), lines share one kind."""
+
+    def __init__(
+        self, log: Callable[[str], None], clock: Clock, burst: int = 3, period: float = 10.0
+    ) -> None:
+        self._log = log
+        self._clock = clock
+        self._burst = burst
+        self._period = period
+        self._kinds: dict[str, _Burst] = {}
+
+    def __call__(self, kind: str, line: str) -> None:
+        """Log ``line`` unless ``kind`` already had its ``burst`` lines this period."""
+        now = self._clock()
+        if kind not in self._kinds and len(self._kinds) >= self.MAX_KINDS:
+            kind = "log lines from other hosts"
+        burst = self._kinds.get(kind)
+        if burst is not None and now - burst.started >= self._period:
+            self._summarise(kind, burst, now)
+            burst = None
+        if burst is None:
+            burst = self._kinds[kind] = _Burst(now)
+        if burst.shown < self._burst:
+            burst.shown += 1
+            self._log(line)
+        else:
+            burst.suppressed += 1
+
+    def flush(self, *, force: bool = False) -> None:
+        """Summarise and forget every kind whose period is over (all of them if ``force``)."""
+        now = self._clock()
+        for kind, burst in list(self._kinds.items()):
+            if force or now - burst.started >= self._period:
+                self._summarise(kind, burst, now)
+                del self._kinds[kind]
+
+    def _summarise(self, kind: str, burst: _Burst, now: float) -> None:
+        if burst.suppressed:
+            self._log(f"{burst.suppressed} more {kind} in the last {now - burst.started:.0f} s")
 
 
 @dataclass(eq=False)
@@ -130,6 +218,10 @@ class _Connection:
     writer: asyncio.StreamWriter
     peer: str
     peer_host: str
+    deadline: float = math.inf
+    """Loop time by which the connection must be adopted."""
+    received: int = 0
+    """Bytes received (counted while the connection is pending)."""
     hello: Hello | None = None
     announced_resume: bool = False
     adopted: bool = False
@@ -165,8 +257,15 @@ class VehicleServer(Generic[M]):
         tick: wall seconds between steps of the stepping task.
         heartbeat_interval: wall seconds of silence towards the controller after which the
             server sends a `Heartbeat`.
-        handshake_timeout: wall seconds a new connection may take to prove it is live (its
-            first session frame) before it is closed.
+        handshake_timeout: wall seconds, from accept, a new connection has to prove it is
+            live (its first session frame) before it is closed, however it trickles bytes.
+            Measured on the event loop's clock (``loop.time()``). The default allows the
+            paper's link, which stalled up to 7 s each way: Hello, HelloReply and the
+            verifying frame may take three such stalls.
+        max_pending: connections that may wait unadopted at once; a new one beyond closes
+            the oldest (one that sent no ``Hello`` first). The controller is not counted.
+        max_pending_bytes: bytes a pending connection may send without being adopted
+            (at least `MAX_FRAME`); a handshake takes about a hundred.
         nonces: source of random bytes for the handshake nonces; ``os.urandom`` by default.
         log: receives one line per notable event (rejections, connections); stderr by
             default.
@@ -176,8 +275,11 @@ class VehicleServer(Generic[M]):
 
     Raises:
         ValueError: a key shorter than `MIN_KEY_SIZE`, or a speed, rate or interval that is
-            not a positive finite number.
+            not a positive finite number, or a limit out of range.
     """
+
+    accept_retry_delay: float = 0.1
+    """Seconds to wait after a failed accept (e.g. no descriptor left) before the next."""
 
     def __init__(
         self,
@@ -191,7 +293,9 @@ class VehicleServer(Generic[M]):
         telemetry_hz: float = 2.0,
         tick: float = 0.05,
         heartbeat_interval: float = 1.0,
-        handshake_timeout: float = 10.0,
+        handshake_timeout: float = 30.0,
+        max_pending: int = 16,
+        max_pending_bytes: int = 4 * MAX_FRAME,
         nonces: Callable[[int], bytes] = os.urandom,
         log: Callable[[str], None] = _stderr,
         event_log: EventLog | None = None,
@@ -210,6 +314,12 @@ class VehicleServer(Generic[M]):
         ):
             if not math.isfinite(value) or value <= 0.0:
                 raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+        if max_pending < 1:
+            raise ValueError(f"max_pending must be at least 1, got {max_pending!r}")
+        if max_pending_bytes < MAX_FRAME:
+            raise ValueError(
+                f"max_pending_bytes must be at least {MAX_FRAME}, got {max_pending_bytes!r}"
+            )
         self.vehicle = vehicle
         self._psk = bytes(psk)
         self._host = host
@@ -220,8 +330,11 @@ class VehicleServer(Generic[M]):
         self._tick = tick
         self._heartbeat_interval = heartbeat_interval
         self._handshake_timeout = handshake_timeout
+        self._max_pending = max_pending
+        self._max_pending_bytes = max_pending_bytes
         self._nonces = nonces
         self._log = log
+        self._throttled = _LogThrottle(log, clock)
         self._events = event_log
         self._samples = 0
         self._last_commit = 0.0
@@ -230,11 +343,14 @@ class VehicleServer(Generic[M]):
         """The current mission's ledger; None until a controller's Hello is adopted."""
         self._active: _Connection | None = None
         self._connections: set[_Connection] = set()
+        # Connections not adopted yet, oldest first (a dict keeps the order).
+        self._pending: dict[_Connection, None] = {}
         self._handlers: set[asyncio.Task[None]] = set()
         # Vehicle-side command id -> (the ledger it belongs to, the wire command id).
         self._origin: dict[int, tuple[ReplyLedger, int]] = {}
         self._next_vehicle_id = 1
-        self._server: asyncio.Server | None = None
+        self._listener: socket.socket | None = None
+        self._acceptor: asyncio.Task[None] | None = None
         self._udp: asyncio.DatagramTransport | None = None
         self._stepper: asyncio.Task[None] | None = None
         self._last_wall = 0.0
@@ -272,18 +388,58 @@ class VehicleServer(Generic[M]):
             RuntimeError: the server was already started.
             OSError: the address cannot be bound.
         """
-        if self._server is not None or self._stepper is not None:
+        if self._listener is not None or self._stepper is not None:
             raise RuntimeError("VehicleServer.start() called twice")
         loop = asyncio.get_running_loop()
-        self._server = await asyncio.start_server(self._on_connect, self._host, self._port)
-        sock = self._server.sockets[0].getsockname()
-        self._address = (str(sock[0]), int(sock[1]))
-        udp, _ = await loop.create_datagram_endpoint(
-            asyncio.DatagramProtocol, local_addr=(self._host, 0)
+        # Our own accept loop rather than asyncio.start_server: asyncio logs a traceback
+        # for every failed accept (up to 100 a second when out of descriptors); here a
+        # failure is counted, logged rate-limited and retried after a pause.
+        infos = await loop.getaddrinfo(
+            self._host, self._port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
         )
+        family, _, _, _, address = infos[0]
+        listener = socket.create_server(address[:2], family=family, backlog=100)
+        listener.setblocking(False)
+        self._listener = listener
+        bound = listener.getsockname()
+        self._address = (str(bound[0]), int(bound[1]))
+        try:
+            udp, _ = await loop.create_datagram_endpoint(
+                asyncio.DatagramProtocol, local_addr=(self._host, 0)
+            )
+        except OSError:
+            self._listener = None
+            listener.close()
+            raise
         self._udp = udp
+        self._acceptor = asyncio.create_task(self._accept_loop(listener), name="vehicle accept")
         self._start_stepping()
         return self._address
+
+    async def _accept_loop(self, listener: socket.socket) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            try:
+                sock, peer = await loop.sock_accept(listener)
+            except OSError as exc:
+                self.stats.accept_errors += 1
+                self._throttled("accept errors", f"accept failed: {exc}; retrying")
+                if self._pending:  # out of descriptors: give up a pending connection's
+                    self._evict("to free a descriptor")
+                await asyncio.sleep(self.accept_retry_delay)
+                continue
+            task = asyncio.create_task(self._on_socket(sock, peer), name=f"vehicle conn {peer}")
+            self._handlers.add(task)
+            task.add_done_callback(self._handlers.discard)
+
+    async def _on_socket(self, sock: socket.socket, peer: object) -> None:
+        try:
+            reader, writer = await asyncio.open_connection(sock=sock)
+        except OSError as exc:
+            sock.close()
+            self._throttled("accept errors", f"connection {peer}: {exc}")
+            return
+        await self._serve_connection(reader, writer, peer, None)
 
     async def start_detached(self) -> None:
         """Start stepping the vehicle without opening any socket.
@@ -307,8 +463,14 @@ class VehicleServer(Generic[M]):
             with contextlib.suppress(asyncio.CancelledError):
                 await self._stepper
             self._stepper = None
-        if self._server is not None:
-            self._server.close()
+        if self._acceptor is not None:
+            self._acceptor.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._acceptor
+            self._acceptor = None
+        if self._listener is not None:
+            self._listener.close()
+            self._listener = None
         for conn in list(self._connections):
             conn.close()
         for task in list(self._handlers):
@@ -316,10 +478,7 @@ class VehicleServer(Generic[M]):
         if self._handlers:
             await asyncio.gather(*self._handlers, return_exceptions=True)
         self._commit_record(force=True)
-        if self._server is not None:
-            with contextlib.suppress(OSError):
-                await self._server.wait_closed()
-            self._server = None
+        self._throttled.flush(force=True)
         if self._udp is not None:
             self._udp.close()
             self._udp = None
@@ -363,6 +522,7 @@ class VehicleServer(Generic[M]):
                 if now - active.last_sent >= self._heartbeat_interval:
                     active.send(Heartbeat(self.vehicle.time), now)
             self._commit_record()
+            self._throttled.flush()
             await asyncio.sleep(self._tick)
 
     def _record_sample(self, t: TelemetrySnapshot) -> None:
@@ -451,9 +611,6 @@ class VehicleServer(Generic[M]):
         """
         await self._serve_connection(reader, writer, peer, datagram_sink)
 
-    async def _on_connect(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        await self._serve_connection(reader, writer, writer.get_extra_info("peername"), None)
-
     async def _serve_connection(
         self,
         reader: asyncio.StreamReader,
@@ -469,53 +626,101 @@ class VehicleServer(Generic[M]):
             writer,
             f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer),
             str(peer[0]) if isinstance(peer, tuple) else self._host,
+            deadline=asyncio.get_running_loop().time() + self._handshake_timeout,
             sink=sink,
         )
+        while len(self._pending) >= self._max_pending:
+            self._evict(f"to make room (at most {self._max_pending} pending)")
         self._connections.add(conn)
+        self._pending[conn] = None
         self.stats.connections += 1
-        self._log(f"connection from {conn.peer}")
+        self._throttled(f"connections from {conn.peer_host}", f"connection from {conn.peer}")
         try:
             await self._serve(conn, reader)
         except (ConnectionError, OSError) as exc:
-            self._log(f"connection {conn.peer}: {exc}")
+            self._closing(conn, f"connection {conn.peer}: {exc}")
         finally:
             conn.close()
             self._connections.discard(conn)
+            self._pending.pop(conn, None)
             if self._active is conn:
                 self._active = None
                 self._log(f"controller {conn.peer} disconnected; replies kept until resumed")
             if task is not None:
                 self._handlers.discard(task)
 
+    def _closing(self, conn: _Connection, line: str) -> None:
+        """Log why a connection closes: rate-limited per host, unless it was the controller."""
+        if conn.adopted:
+            self._log(line)
+        else:
+            self._throttled(f"connections from {conn.peer_host} closed", line)
+
+    def _evict(self, why: str) -> None:
+        """Close the oldest pending connection, preferring one that has not sent a Hello.
+
+        Why that preference: a real controller sends its Hello at once, so under a flood of
+        connections that send nothing (or junk) it is never the one evicted.
+        """
+        victim = next((c for c in self._pending if c.hello is None), None)
+        if victim is None:
+            victim = next(iter(self._pending))
+        del self._pending[victim]
+        self.stats.evicted += 1
+        self._closing(victim, f"connection {victim.peer}: closed unadopted {why}")
+        victim.close()
+
     async def _serve(self, conn: _Connection, reader: asyncio.StreamReader) -> None:
-        while not conn.closed:
-            if conn.adopted:
-                data = await reader.read(4096)
-            else:
-                try:
-                    data = await asyncio.wait_for(reader.read(4096), self._handshake_timeout)
-                except TimeoutError:
-                    self._log(f"connection {conn.peer}: no verified frame in time; closing")
-                    return
-            if not data:
+        try:
+            # The whole handshake, however the bytes trickle in, within the deadline.
+            async with asyncio.timeout_at(conn.deadline) as deadline:
+                while not conn.adopted:
+                    if not await self._receive(conn, reader):
+                        return
+                deadline.reschedule(None)
+        except TimeoutError:
+            if not conn.adopted:  # else only a drain after the adopting frame was cut
+                self.stats.timed_out += 1
+                self._closing(conn, f"connection {conn.peer}: no verified frame in time; closing")
                 return
-            self.catch_up()
-            for item in conn.codec.feed(data):
-                if conn.closed:
-                    return
-                if isinstance(item, Rejected):
-                    self.stats.rejected += 1
-                    self._log(f"rejected from {conn.peer}: {item.reason.value}: {item.detail}")
-                elif isinstance(item, Hello):
-                    self._on_hello(conn, item)
-                # The first session frame proves the connection live (even an authentic
-                # frame that fails later checks): only then is it the controller.
-                if not conn.adopted and conn.hello is not None and conn.codec.peer_verified:
-                    self._adopt(conn)
-                if conn.adopted and not isinstance(item, Rejected | Hello):
-                    self._on_session(conn, item)
-            with contextlib.suppress(ConnectionError):
-                await conn.writer.drain()
+        while await self._receive(conn, reader):
+            pass
+
+    async def _receive(self, conn: _Connection, reader: asyncio.StreamReader) -> bool:
+        """Read and handle one chunk; False once the connection is over."""
+        data = await reader.read(4096)
+        if not data or conn.closed:
+            return False
+        self.catch_up()
+        pending = not conn.adopted
+        for item in conn.codec.feed(data):
+            if conn.closed:
+                return False
+            if isinstance(item, Rejected):
+                self.stats.rejected += 1
+                self._throttled(
+                    f"frames rejected from {conn.peer_host}",
+                    f"rejected from {conn.peer}: {item.reason.value}: {item.detail}",
+                )
+            elif isinstance(item, Hello):
+                self._on_hello(conn, item)
+            # The first session frame proves the connection live (even an authentic
+            # frame that fails later checks): only then is it the controller.
+            if not conn.adopted and conn.hello is not None and conn.codec.peer_verified:
+                self._adopt(conn)
+            if conn.adopted and not isinstance(item, Rejected | Hello):
+                self._on_session(conn, item)
+        if pending and not conn.adopted:
+            conn.received += len(data)
+            if conn.received > self._max_pending_bytes:
+                self.stats.overflowed += 1
+                self._closing(
+                    conn, f"connection {conn.peer}: {conn.received} bytes unverified; closing"
+                )
+                return False
+        with contextlib.suppress(ConnectionError):
+            await conn.writer.drain()
+        return not conn.closed
 
     def _on_hello(self, conn: _Connection, hello: Hello) -> None:
         received_at = self.vehicle.time
@@ -550,6 +755,7 @@ class VehicleServer(Generic[M]):
             self._log(f"connection {conn.peer}: mission changed during the handshake; closing")
             conn.close()
             return
+        self._pending.pop(conn, None)
         old = self._active
         if old is not None and old is not conn:
             self._log(f"controller {old.peer} replaced by {conn.peer}")
