@@ -67,6 +67,7 @@ class RunEnd(enum.Enum):
     VEHICLE_LOST_MISSION = "vehicle-lost-mission"  # the vehicle no longer knows it
     TIME_LIMIT = "time-limit"  # the run's time limit passed first
     SPIN = "spin"  # the engine fired without end, never waiting for the vehicle (a cycle)
+    LOG_BEHIND = "log-behind"  # the vehicle is ahead of the log: it lost its last commits
 
 
 @dataclass(frozen=True)
@@ -145,6 +146,21 @@ class _MissionLost(Exception):
     """The vehicle no longer knows the mission."""
 
 
+class _LogBehind(Exception):
+    """A reply skipped sequence numbers: the vehicle saw acknowledgements this log lost.
+
+    The controller acknowledges a reply only after committing it, so a gap means the
+    log lost commits it had made (a truncated write-ahead log, a restored backup). The
+    replies in the gap are gone from the vehicle's ledger: going on would drive the
+    mission from a marking the vehicle has left behind."""
+
+
+#: Rejected telemetry datagrams logged one by one per connection; after that, one
+#: summary event per `REJECTION_SUMMARY_S` (a flood of junk must not flood the log).
+REJECTIONS_LOGGED = 10
+REJECTION_SUMMARY_S = 10.0
+
+
 def _print(line: str) -> None:
     print(line, flush=True)
 
@@ -193,6 +209,9 @@ class Controller:
         self._nonces = nonces
         self._console = console
         self._telemetry: DatagramReceiver | None = None
+        self._rejections_seen = 0
+        self._rejections_unlogged = 0
+        self._rejections_since = 0.0
         self._rejections: deque[float] = deque()
         self._last_sent = 0.0
         self._heartbeat_interval = self.options.heartbeat_interval
@@ -348,6 +367,10 @@ class Controller:
         except _MissionLost as exc:
             result.end = RunEnd.VEHICLE_LOST_MISSION
             self._note("mission-lost", str(exc))
+        except _LogBehind as exc:
+            result.end = RunEnd.LOG_BEHIND
+            result.detail = str(exc)
+            self._note("log-behind", str(exc))
         except EngineSpin:
             pass  # logged by `_on_reply`; `run` ends the mission as a spin
 
@@ -378,6 +401,7 @@ class Controller:
             )
         assert codec.session_key is not None
         self._telemetry = DatagramReceiver(codec.session_key)
+        self._rejections_seen = self._rejections_unlogged = 0
         self._heartbeat_interval = max(
             0.05, min(self.options.heartbeat_interval, reply.silence_timeout / 4)
         )
@@ -459,6 +483,14 @@ class Controller:
     def _on_reply(self, conn: Connection, codec: StreamCodec, reply: Reply) -> None:
         assert self._result is not None
         now = self._now()
+        if reply.reply_seq > self.consumed + 1:
+            raise _LogBehind(
+                f"the vehicle sent reply #{reply.reply_seq} but this log consumed replies "
+                f"only up to #{self.consumed}: the vehicle had #{self.consumed + 1}.."
+                f"#{reply.reply_seq - 1} acknowledged, so the log lost its last commits; "
+                "the mission's state is unknown here: take over the vehicle by hand, do not "
+                "resume from this log"
+            )
         if reply.reply_seq <= self.consumed:
             self._result.duplicate_replies += 1
             self._write(conn, codec, ReplyAck(self.consumed))
@@ -629,7 +661,23 @@ class Controller:
         else:
             result.telemetry_rejected += 1
             if item.reason is not RejectReason.LATE:
-                self.log.event(self._now(), "telemetry-rejected", reason=item.reason.value)
+                self._log_rejected_datagram(item.reason.value)
+
+    def _log_rejected_datagram(self, reason: str) -> None:
+        """The first few rejections one by one, then a count every few seconds."""
+        now = self._now()
+        self._rejections_seen += 1
+        if self._rejections_seen <= REJECTIONS_LOGGED:
+            self.log.event(now, "telemetry-rejected", reason=reason)
+            self._rejections_since = now
+            return
+        self._rejections_unlogged += 1
+        if now - self._rejections_since >= REJECTION_SUMMARY_S:
+            self.log.event(
+                now, "telemetry-rejected", reason=reason, count=self._rejections_unlogged
+            )
+            self._rejections_unlogged = 0
+            self._rejections_since = now
 
     # ------------------------------------------------------------------ status
 

@@ -480,8 +480,50 @@ class Engine:
             engine.started = bool(state.get("started", True))
         except (KeyError, AssertionError, TypeError, ValueError) as exc:
             raise EngineError(f"the saved engine state is damaged ({exc!r})") from None
+        problem = engine._inconsistency()
+        if problem is not None:
+            raise EngineError(
+                f"the saved engine state cannot be a state of this mission: {problem}; "
+                "the log was damaged or edited: do not resume from it"
+            )
         engine._requeue_all()
         return engine
+
+    def _inconsistency(self) -> str | None:
+        """Why a restored state cannot have come from running this net, or None.
+
+        Cheap checks that any state the engine itself committed passes: token counts are
+        not negative; every command in flight is a command transition's, with its token
+        in that transition's pending place (one token per command in flight); command
+        ids are positive, distinct and below the next id to hand out (ids only grow, so a
+        new command never reuses one the vehicle has run).
+        """
+        net = self.net
+        if any(tokens < 0 for tokens in self.marking):
+            return "a negative token count"
+        if self.firings < 0:
+            return "a negative firing count"
+        flying: dict[str, int] = {}
+        for command_id, flight in self._in_flight.items():
+            transition = net.transitions[flight.transition]
+            if transition.command is None:
+                return f"command #{command_id} in flight for '{transition.name}', which sends none"
+            if not 0 < command_id < self._next_command_id:
+                return (
+                    f"command #{command_id} in flight, but the next command id is "
+                    f"{self._next_command_id} (ids only grow)"
+                )
+            flying[transition.name] = flying.get(transition.name, 0) + 1
+        for index, place in enumerate(net.places):
+            if place.pending_of is not None and self.marking[index] != flying.get(
+                place.pending_of, 0
+            ):
+                return (
+                    f"place '{place.name}' holds {self.marking[index]} token(s) but "
+                    f"{flying.get(place.pending_of, 0)} command(s) of '{place.pending_of}' "
+                    "are in flight"
+                )
+        return None
 
     # ------------------------------------------------------------------ steps
 

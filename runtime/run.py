@@ -23,9 +23,10 @@ import asyncio
 import os
 import random
 import secrets
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from runtime.controller import Controller, ControllerOptions, RunResult
 from runtime.engine import Engine, Policy
@@ -35,6 +36,9 @@ from runtime.gate import ApprovedMission
 from runtime.link import Link, LinkEmulator, LinkProfile, MemoryLink, SocketLink
 from runtime.vclock import run_virtual
 from runtime.vehicle.model import VehicleModel
+
+if TYPE_CHECKING:
+    from coral_lang.net import Net
 
 __all__ = ["RunConfig", "controller_log_path", "resume_mission", "run_mission"]
 
@@ -181,10 +185,16 @@ def resume_mission(mission: ApprovedMission, log_path: Path, config: RunConfig) 
 
         def make(link: Link, now: float, nonces: Callable[[int], bytes]) -> Controller:
             log.event(now, "resume", pid=os.getpid())
-            return Controller.resume(
-                lambda state: Engine.restore(
+
+            def restore(state: Mapping[str, object]) -> Engine:
+                engine = Engine.restore(
                     mission.net, mission.approval, state, policy=config.policy, seed=config.seed
-                ),
+                )
+                check_verified_state(mission.net, engine.marking)
+                return engine
+
+            return Controller.resume(
+                restore,
                 link,
                 config.psk,
                 log,
@@ -196,6 +206,34 @@ def resume_mission(mission: ApprovedMission, log_path: Path, config: RunConfig) 
         return _drive(config, make, rng, mission.net.name, model)
     finally:
         log.close()
+
+
+def check_verified_state(net: Net, marking: Sequence[int]) -> None:
+    """Refuse to resume from a marking the verified net can never reach.
+
+    A committed checkpoint is always a reachable marking (the engine only fires enabled
+    transitions), so one that is not was damaged or edited: resuming from it would drive
+    the vehicle from a state analysis never saw. The state space is explored again (the
+    certificate proved it finite; the pool mission takes well under a second); if the
+    search cannot finish within its default budget, the check is skipped and said so.
+
+    Raises:
+        runtime.engine.EngineError: the marking is not a reachable state of ``net``.
+    """
+    import numpy as np
+
+    from analysis.statespace import explore
+    from runtime.engine import EngineError
+
+    target = np.asarray(marking, dtype=np.int64)
+    space = explore(net, stop_when=lambda first, block: bool((block == target).all(axis=1).any()))
+    if space.find(lambda block: (block == target).all(axis=1)) is not None:
+        return
+    if space.complete:
+        raise EngineError(
+            f"the log's marking {net.marking_dict(marking)} is not a reachable state of the "
+            "verified net: the log was damaged or edited; do not resume from it"
+        )
 
 
 def _options(config: RunConfig) -> ControllerOptions:

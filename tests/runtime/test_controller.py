@@ -220,3 +220,111 @@ def test_command_and_reply_frames_fit_the_paper_link(pool: tuple[Net, Certificat
             size = frame_size(Command(1, tr.command.name, 0.0, dict(tr.command.params)))
             assert size < 120, (tr.name, size)
     assert frame_size(Reply(1, 1, "timeout", 0.0)) < 60
+
+
+def test_a_log_that_lost_its_last_commits_ends_the_run_instead_of_hanging(
+    pool: tuple[Net, CertificateCheck], tmp_path: Path
+) -> None:
+    """The red team's truncated write-ahead log: the vehicle had acknowledgements the
+    log no longer holds. The resumed controller must stop, saying so, not wait forever."""
+    import shutil
+
+    net, approval = pool
+    log_path = tmp_path / "ctl.sqlite"
+    backup = tmp_path / "early.sqlite"
+
+    async def main() -> tuple[RunResult, RunResult, RunResult]:
+        loop = asyncio.get_running_loop()
+        server = VehicleServer(Vehicle(default_config(), seed=0), PSK, clock=loop.time)
+        link = MemoryLink(server, None)
+
+        def quiet(line: str) -> None:
+            del line
+
+        def resumed(limit: float) -> Controller:
+            return Controller.resume(
+                lambda s: Engine.restore(net, approval, s),
+                link,
+                PSK,
+                EventLog.open(log_path, writable=True),
+                options=ControllerOptions(time_limit=limit),
+                console=quiet,
+            )
+
+        try:
+            log = EventLog.create(log_path, role="controller", mission=net.name, meta={})
+            first = Controller.start_new(
+                Engine(net, approval),
+                link,
+                PSK,
+                log,
+                mission_id=7,
+                now=loop.time(),
+                options=ControllerOptions(time_limit=40.0),
+                console=quiet,
+            )
+            one = await first.run()
+            log.close()
+            shutil.copy(log_path, backup)  # what a truncated log will hold
+            second = resumed(80.0)
+            two = await second.run()
+            second.log.close()
+            shutil.copy(backup, log_path)  # the commits of the second run are lost
+            third = resumed(3600.0)
+            three = await third.run()
+            third.log.close()
+            return one, two, three
+        finally:
+            await link.aclose()
+            await server.stop()
+
+    one, two, three = run_virtual(main())
+    assert one.end is RunEnd.TIME_LIMIT and two.end is RunEnd.TIME_LIMIT
+    assert two.replies > 0  # the vehicle got acknowledgements the backup does not have
+    assert three.end is RunEnd.LOG_BEHIND
+    assert "lost its last commits" in three.detail
+    with EventLog.open(log_path) as log:
+        assert log.count("log-behind") == 1
+
+
+def test_a_flood_of_junk_telemetry_is_counted_not_logged_datagram_by_datagram(
+    pool: tuple[Net, CertificateCheck], tmp_path: Path
+) -> None:
+    """2.88M random datagrams once grew a log from 80 KB to 61 MB: now the first few are
+    logged, then one summary event every few seconds with their count."""
+    from runtime.controller import REJECTION_SUMMARY_S, REJECTIONS_LOGGED
+    from runtime.protocol import DatagramReceiver
+
+    net, approval = pool
+    rng = random.Random(5)
+    datagrams = 20_000
+    seconds = 60.0
+
+    async def main() -> RunResult:
+        loop = asyncio.get_running_loop()
+        log = EventLog.create(tmp_path / "ctl.sqlite", role="controller", mission=net.name, meta={})
+        controller = Controller.start_new(
+            Engine(net, approval),
+            MemoryLink(VehicleServer(Vehicle(default_config()), PSK, clock=loop.time), None),
+            PSK,
+            log,
+            mission_id=1,
+            now=loop.time(),
+            console=lambda line: None,
+        )
+        controller._result = result = RunResult(RunEnd.FINAL, {}, 0.0, 0.0)
+        controller._telemetry = DatagramReceiver(bytes(32))
+        for i in range(datagrams):
+            await asyncio.sleep(seconds / datagrams)
+            controller._on_datagram(rng.randbytes(rng.randrange(1, 80)) if i % 2 else b"\x00")
+        log.close()
+        return result
+
+    result = run_virtual(main())
+    assert result.telemetry_rejected == datagrams
+    with EventLog.open(tmp_path / "ctl.sqlite") as log:
+        events = list(log.events("telemetry-rejected"))
+    summaries = [e for e in events if "count" in e.data]
+    assert len(events) - len(summaries) == REJECTIONS_LOGGED
+    assert len(summaries) <= seconds / REJECTION_SUMMARY_S + 1
+    assert sum(int(str(e.data["count"])) for e in summaries) <= datagrams - REJECTIONS_LOGGED
