@@ -14,22 +14,26 @@ $(STAMP): pyproject.toml
 
 # The paper's experiment on one machine: compile and verify the pool mission (reports and
 # certificate in out/), then run it with the CORAL engine against the simulated ROMEO across
-# the emulated Genoa-Lisbon link, in virtual time; logs and plots in out/run/.
+# the emulated Genoa-Lisbon link, in virtual time; logs and plots in out/run/. The
+# certificate is signed with a demo key made once in out/ (the verifier's side), and the
+# run trusts its public half (the operator's side): docs/verify.md, "Signed certificates".
 MISSION := examples/pool_mission/pool_mission.coral
+DEMO_KEY := out/demo-signing.key
 
 demo: $(STAMP)
 	@mkdir -p out
+	test -f $(DEMO_KEY) || $(BIN)/coral-check keygen --out $(DEMO_KEY) --comment "make demo"
 	$(BIN)/python -m coral_lang.demo $(MISSION)
 	$(BIN)/coral-check verify $(MISSION) -o out/pool_mission.verification.txt \
-		--certificate out/pool_mission.certificate.json
+		--certificate out/pool_mission.certificate.json --signing-key $(DEMO_KEY)
 	$(BIN)/coral-check verify $(MISSION) --format json -o out/pool_mission.verification.json
 	$(BIN)/coral-check $(MISSION) --format html -o out/pool_mission.report.html
 	@cat out/pool_mission.verification.txt
 	rm -rf out/run
 	$(BIN)/coral-run $(MISSION) --certificate out/pool_mission.certificate.json \
-		--link genoa-lisbon --seed 0 --out out/run
+		--trusted-keys $(DEMO_KEY).pub --link genoa-lisbon --seed 0 --out out/run
 	@echo "verification report: out/pool_mission.verification.txt (.json, .report.html)"
-	@echo "pre-mission certificate: out/pool_mission.certificate.json"
+	@echo "pre-mission certificate: out/pool_mission.certificate.json (signed by $(DEMO_KEY))"
 	@echo "mission run: out/run/controller.sqlite, out/run/vehicle.sqlite (event logs),"
 	@echo "             out/run/events.png (events' sequence), out/run/telemetry.png (track, depth, heading)"
 

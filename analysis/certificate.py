@@ -19,6 +19,15 @@ without a ``profile`` section (issued before profiles were covered) is refused t
 Descriptions, reply meanings, the profile file's path and commands the mission does
 not use are not recorded, so changing them keeps the certificate valid.
 
+A certificate says nothing by itself: anyone can edit a JSON file. So the verifier
+signs it (`analysis.signing`: Ed25519 over its canonical JSON, in a ``signature``
+field), and the runtime passes the public keys it trusts (``trusted``): an unsigned
+certificate, one signed by an unknown key, or one edited after signing is refused, and
+so is one past its ``expires`` date. Given ``trusted``, every field the check reads is
+validated first (types, the integer format 1), and every property's own verdict is read:
+the top-level ``verdict`` is a summary, never trusted alone. Without ``trusted`` (checks
+of a net by ``coral-check`` or by tests) the signature is not looked at.
+
 A certificate is JSON (format documented in ``docs/verify.md``)::
 
     {"format": 1, "tool": "coral", "tool_version": "0.1.0", "net": "pool_mission",
@@ -28,11 +37,15 @@ A certificate is JSON (format documented in ``docs/verify.md``)::
      "options": {"max_states": 2000000, ...},
      "profile": {"vehicle": "ROMEO", "file": ".../romeo.yaml", "digest": "sha256:...",
                  "commands": {"DEPTH?": {"kind": "query", "params": [...],
-                                         "replies": ["done", "timeout"], ...}}}}
+                                         "replies": ["done", "timeout"], ...}}},
+     "expires": "2026-12-21T07:00:00Z",
+     "signature": {"algorithm": "ed25519", "key_id": "3f2a...", "value": "base64..."}}
 """
 
 from __future__ import annotations
 
+import base64
+import binascii
 import datetime as dt
 import json
 from collections.abc import Callable, Mapping
@@ -40,7 +53,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from analysis.report import Report, Verdict
-from analysis.termination import certificate_gaps
+from analysis.signing import ALGORITHM, TrustStore, canonical_bytes
+from analysis.termination import certificate_gaps, required_keys
 from analysis.verify import VerifyOptions
 from coral_lang.diagnostics import CoralError
 from coral_lang.mission import profile_digest
@@ -51,6 +65,14 @@ CERTIFICATE_FORMAT = 1
 Clock = Callable[[], dt.datetime]
 MAX_LISTED_CHANGES = 6
 """How many profile changes a refusal names before it says "and N more"."""
+MAX_CERTIFICATE_BYTES = 16 * 1024 * 1024
+"""A file larger than this is not a certificate (the largest profile sections are a
+few kilobytes): refused unread rather than parsed into memory."""
+DIGEST_SHOWN = 19
+"""How much of a certificate's own net digest a refusal shows (``sha256:`` and 12 hex
+digits): enough to tell certificates apart. The digest the net *should* have is never
+shown: a forger would copy it."""
+TIME_FORMAT = "%Y-%m-%dT%H:%M:%SZ"
 
 
 class CertificateError(CoralError, ValueError):
@@ -81,8 +103,14 @@ def make_certificate(
     clock: Clock = _utc_now,
     *,
     profile_content: Mapping[str, object] | None = None,
+    expires: dt.datetime | None = None,
 ) -> dict[str, object]:
     """The certificate for ``report``: its digest, verdicts and the date of issue.
+
+    The top-level ``verdict`` is computed here from the listed properties (the worst
+    verdict of the required ones), not copied from anywhere: a search cut short by its
+    budgets leaves properties inconclusive, and then the certificate cannot say
+    ``proven``. ``expires`` (optional) is the moment after which the runtime refuses it.
 
     A certificate is made for any report; only one whose verdict is ``proven`` lets the
     runtime run the net (see `check_certificate`). Every property is listed with its
@@ -101,28 +129,50 @@ def make_certificate(
         content = json.loads(json.dumps(dict(profile_content)))
         content["digest"] = profile_digest(content)
         profile["profile"] = content
-    return {
+    properties: list[dict[str, object]] = [
+        {
+            "key": p.key,
+            "title": p.title,
+            "verdict": p.verdict.value,
+            "method": p.method,
+            "required": p.required,
+        }
+        for p in report.properties
+    ]
+    space = report.statespace
+    certificate: dict[str, object] = {
         "format": CERTIFICATE_FORMAT,
         "tool": "coral",
         "tool_version": tool_version(),
         "net": report.net_name,
         "net_digest": report.digest,
         "sources": list(report.sources),
-        "verdict": report.verdict.value,
-        "issued": clock().astimezone(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "properties": [
-            {
-                "key": p.key,
-                "title": p.title,
-                "verdict": p.verdict.value,
-                "method": p.method,
-                "required": p.required,
-            }
-            for p in report.properties
-        ],
+        "verdict": overall_verdict(properties),
+        "issued": clock().astimezone(dt.UTC).strftime(TIME_FORMAT),
+        "properties": properties,
         "options": settings,
+        "search": {
+            "states": space.states,
+            "complete": space.complete,
+            "stopped_reason": space.stopped_reason,
+        },
         **profile,
     }
+    if expires is not None:
+        certificate["expires"] = expires.astimezone(dt.UTC).strftime(TIME_FORMAT)
+    return certificate
+
+
+def overall_verdict(properties: list[dict[str, object]]) -> str:
+    """The worst verdict among the required ``properties`` (violated > inconclusive >
+    proven; a property with any other verdict counts as violated)."""
+    order = [Verdict.PROVEN.value, Verdict.INCONCLUSIVE.value, Verdict.VIOLATED.value]
+    worst = 0
+    for p in properties:
+        if p.get("required", True) is not False:
+            verdict = p.get("verdict")
+            worst = max(worst, order.index(verdict) if verdict in order else 2)
+    return order[worst]
 
 
 def write_certificate(certificate: dict[str, object], path: str | Path) -> None:
@@ -141,10 +191,20 @@ class CertificateCheck:
     profile_digest: str | None = None
     """The digest of the certificate's ``profile`` section, when the check compared
     it with the mission's profile (None: checked without profile content)."""
+    signer: str | None = None
+    """The key id of the trusted key that signed it (None: checked without a trust
+    store, so the signature was not looked at)."""
+    expires: str | None = None
+    """When it stops being accepted (None: no expiry recorded)."""
 
 
 def check_certificate(
-    net: Net, path: str | Path, *, profile_content: Mapping[str, object] | None = None
+    net: Net,
+    path: str | Path,
+    *,
+    profile_content: Mapping[str, object] | None = None,
+    trusted: TrustStore | None = None,
+    clock: Clock = _utc_now,
 ) -> CertificateCheck:
     """Accept the certificate at ``path`` for ``net``, or explain why not.
 
@@ -154,25 +214,120 @@ def check_certificate(
     a net with no profile behind it (a PNML model) leave it out, and the section, if
     any, is not looked at.
 
+    ``trusted`` is the set of public keys whose signatures are accepted; the runtime
+    always gives one (perhaps empty). Without it the signature is not checked: that is
+    for tools that only want to know what a certificate claims, never for a run.
+    ``clock`` decides expiry.
+
     Raises:
-        CertificateError: the file is missing or not a certificate, it was issued for
+        CertificateError: the file is missing, not a certificate or malformed (the
+            message names the field); with ``trusted``: unsigned, signed by a key not
+            in it (named by key id), or edited after signing; expired; issued for
             another net (the mission changed since it was verified) or, with
             ``profile_content``, against a profile that has changed since (the message
             names each changed field) or before certificates covered the profile; some
-            required property was not proven, or it lacks a property this version
-            requires (it was issued by an older version). The message says which, and
-            how to get a valid one.
+            required property missing or not proven, or it lacks a property this
+            version requires (it was issued by an older version). The message says
+            which, and how to get a valid one.
     """
     path = Path(path)
     how = _how(path, profile_content)
+    data = read_certificate(path, how)
+    return check_certificate_data(
+        net,
+        data,
+        str(path),
+        profile_content=profile_content,
+        trusted=trusted,
+        clock=clock,
+        how=how,
+    )
+
+
+def read_certificate(path: Path, how: str = "") -> dict[str, object]:
+    """The JSON object in ``path``; `CertificateError` if it cannot be one.
+
+    Duplicate keys, NaN and nesting too deep for the parser are refused here: each
+    would make the content a reader sees differ from what was signed, or crash it.
+    """
+    how = how or _how(path, None)
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        size = path.stat().st_size
+        text = path.read_text(encoding="utf-8") if size <= MAX_CERTIFICATE_BYTES else ""
     except FileNotFoundError:
         raise CertificateError(f"{path}: no certificate; {how}") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (OSError, UnicodeDecodeError) as exc:
         raise CertificateError(f"{path}: not a readable certificate ({exc}); {how}") from None
-    if not isinstance(data, dict) or data.get("format") != CERTIFICATE_FORMAT:
-        raise CertificateError(f"{path}: not a coral certificate (format 1); {how}")
+    if size > MAX_CERTIFICATE_BYTES:
+        raise CertificateError(f"{path}: too large for a certificate ({size} bytes); {how}")
+    try:
+        data = json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constant)
+    except ValueError as exc:
+        raise CertificateError(f"{path}: not a readable certificate ({exc}); {how}") from None
+    except RecursionError:
+        raise CertificateError(
+            f"{path}: not a readable certificate (nested too deeply); {how}"
+        ) from None
+    if not isinstance(data, dict):
+        raise CertificateError(f"{path}: not a coral certificate (not a JSON object); {how}")
+    return data
+
+
+def _no_duplicates(pairs: list[tuple[str, object]]) -> dict[str, object]:
+    result: dict[str, object] = {}
+    for key, value in pairs:
+        if key in result:
+            raise ValueError(f"duplicate key {key!r}")
+        result[key] = value
+    return result
+
+
+def _no_constant(name: str) -> object:
+    raise ValueError(f"{name} is not JSON")
+
+
+def check_certificate_data(
+    net: Net,
+    data: Mapping[str, object],
+    source: str,
+    *,
+    profile_content: Mapping[str, object] | None = None,
+    trusted: TrustStore | None = None,
+    clock: Clock = _utc_now,
+    how: str = "",
+) -> CertificateCheck:
+    """`check_certificate` on content already read (``source`` names it in messages);
+    ``coral-run --verify`` checks the certificate it just made this way, in memory."""
+    path = Path(source)
+    how = how or _how(path, profile_content)
+    try:
+        return _check(net, data, path, profile_content, trusted, clock, how)
+    except RecursionError:  # canonical JSON of absurdly nested content
+        raise CertificateError(
+            f"{path}: malformed certificate (nested too deeply); {how}"
+        ) from None
+
+
+def _check(
+    net: Net,
+    data: Mapping[str, object],
+    path: Path,
+    profile_content: Mapping[str, object] | None,
+    trusted: TrustStore | None,
+    clock: Clock,
+    how: str,
+) -> CertificateCheck:
+    fmt = data.get("format")
+    if type(fmt) is not int or fmt != CERTIFICATE_FORMAT:
+        raise CertificateError(
+            f"{path}: not a coral certificate (format must be the integer 1, found "
+            f"{json.dumps(fmt)[:40]}); {how}"
+        )
+    _validate(path, data, how)
+    signer = None if trusted is None else _check_signature(path, data, trusted, how)
+    expires = data.get("expires")
+    if isinstance(expires, str) and clock().astimezone(dt.UTC) >= _parse_time(expires):
+        raise CertificateError(f"{path}: the certificate expired at {expires}; {how}")
     recorded = data.get("profile")
     accepted_profile: str | None = None
     if profile_content is not None and isinstance(recorded, dict):
@@ -180,37 +335,50 @@ def check_certificate(
         # the profile field that changed says more than "the net changed".
         accepted_profile = _check_profile(path, recorded, profile_content, how)
     digest = net.digest()
-    if data.get("net_digest") != digest:
+    claimed = str(data.get("net_digest"))
+    if claimed != digest:
         raise CertificateError(
-            f"{path}: issued for net {data.get('net_digest')!s}, but this mission compiles to "
-            f"{digest}: it changed since it was verified; {how}"
+            f"{path}: the certificate is for another net (its digest begins "
+            f"{claimed[:DIGEST_SHOWN]}), not this mission as it compiles now: it changed "
+            f"since it was verified, or the certificate is another mission's; {how}"
         )
+    version = data.get("tool_version", "an unknown version")
     if profile_content is not None and accepted_profile is None:
-        version = data.get("tool_version", "an unknown version")
         raise CertificateError(
             f"{path}: the certificate predates profile coverage: coral {version} did not "
             "record the vehicle profile it verified against, so a profile edited since "
             f"would go unnoticed; {how} with this version to get a new one"
         )
-    listed = [p for p in data.get("properties", []) if isinstance(p, dict)]
-    if data.get("verdict") != Verdict.PROVEN.value:
-        failing = [
-            f"{p.get('key')} {p.get('verdict')}"
-            for p in listed
-            if p.get("verdict") != Verdict.PROVEN.value and p.get("required", True)
-        ]
+    listed = _properties(data)
+    # Every property's own verdict: the top-level one is a summary, and a certificate
+    # whose summary disagrees with its properties is refused whichever way it leans.
+    must = {"bounded", "deadlock", *(f"assert:{n}" for n in range(1, len(net.assertions) + 1))}
+    failing = [
+        f"{p['key']} {p['verdict']}"
+        for p in listed
+        if p["verdict"] != Verdict.PROVEN.value
+        and (p.get("required", True) is not False or p["key"] in must)
+    ]
+    shown = {str(p["key"]) for p in listed}
+    termination = set(required_keys(net))
+    failing += [f"{key} missing" for key in sorted(must - shown)]
+    if failing or data.get("verdict") != Verdict.PROVEN.value:
         raise CertificateError(
             f"{path}: verification did not pass ({', '.join(failing) or data.get('verdict')}); "
             f"{how}"
         )
     gaps = certificate_gaps(net, listed)
     if gaps:
-        version = data.get("tool_version", "an unknown version")
+        what = (
+            "which did not check termination (no engine cycle, a final marking always "
+            "reachable, 'require termination')"
+            if termination - shown
+            else "which cannot verify every 'require' of this mission"
+        )
         raise CertificateError(
             f"{path}: the certificate does not show what this coral requires of the mission "
-            f"({', '.join(gaps)}): it was issued by coral {version}, which did not check "
-            "termination (no engine cycle, a final marking always reachable, 'require "
-            f"termination'); {how} with this version to get a new one"
+            f"({', '.join(gaps)}): it was issued by coral {version}, {what}; {how} with this "
+            "version to get a new one"
         )
     return CertificateCheck(
         path=str(path),
@@ -218,7 +386,136 @@ def check_certificate(
         issued=str(data.get("issued", "")),
         tool_version=str(data.get("tool_version", "")),
         profile_digest=accepted_profile,
+        signer=signer,
+        expires=expires if isinstance(expires, str) else None,
     )
+
+
+def _validate(path: Path, data: Mapping[str, object], how: str) -> None:
+    """Refuse a certificate whose fields have the wrong shape, naming the field."""
+
+    def bad(field: str, want: str) -> CertificateError:
+        found = type(data.get(field)).__name__ if field in data else "missing"
+        return CertificateError(
+            f"{path}: malformed certificate: '{field}' must be {want} (found {found}); {how}"
+        )
+
+    for field in ("net_digest", "verdict", "issued"):
+        if not isinstance(data.get(field), str):
+            raise bad(field, "a string")
+    for field in ("tool_version", "net"):
+        if field in data and not isinstance(data[field], str):
+            raise bad(field, "a string")
+    for field in ("options", "profile", "signature"):
+        if field in data and not isinstance(data[field], dict):
+            raise bad(field, "an object")
+    if "expires" in data and data["expires"] is not None:
+        expires = data["expires"]
+        if not isinstance(expires, str) or _try_time(expires) is None:
+            raise bad("expires", "a UTC time such as 2026-12-31T23:59:59Z")
+    properties = data.get("properties")
+    if not isinstance(properties, list):
+        raise bad("properties", "a list")
+    for number, p in enumerate(properties, start=1):
+        where = f"properties[{number}]"
+        if not isinstance(p, dict):
+            raise CertificateError(
+                f"{path}: malformed certificate: {where} is not an object; {how}"
+            )
+        for field in ("key", "verdict"):
+            if not isinstance(p.get(field), str):
+                raise CertificateError(
+                    f"{path}: malformed certificate: {where}.{field} must be a string; {how}"
+                )
+        if "required" in p and not isinstance(p["required"], bool):
+            raise CertificateError(
+                f"{path}: malformed certificate: {where}.required must be true or false; {how}"
+            )
+
+
+def _properties(data: Mapping[str, object]) -> list[dict[str, object]]:
+    listed = data.get("properties")
+    assert isinstance(listed, list)  # checked by _validate
+    return [p for p in listed if isinstance(p, dict)]
+
+
+def _check_signature(path: Path, data: Mapping[str, object], trusted: TrustStore, how: str) -> str:
+    """The key id of the trusted key whose signature covers ``data``, else a refusal:
+    unsigned, unknown signer, or content edited after signing."""
+    signature = data.get("signature")
+    if signature is None:
+        raise CertificateError(
+            f"{path}: the certificate is not signed, and a run accepts only certificates "
+            f"signed by a trusted key ({trusted.describe()}); sign it with 'coral-check "
+            "verify MISSION --certificate FILE --signing-key KEY' and trust KEY.pub with "
+            "--trusted-keys, or, on a development machine, verify and run in one step with "
+            "'coral-run MISSION --verify'"
+        )
+    assert isinstance(signature, dict)  # checked by _validate
+    algorithm, kid, value = (signature.get(k) for k in ("algorithm", "key_id", "value"))
+    if algorithm != ALGORITHM or not isinstance(kid, str) or not isinstance(value, str):
+        raise CertificateError(
+            f"{path}: malformed certificate: 'signature' must have algorithm \"{ALGORITHM}\" "
+            f"and string key_id and value; {how}"
+        )
+    key = trusted.get(kid)
+    if key is None:
+        raise CertificateError(
+            f"{path}: signed by key {kid[:32]}, which is not trusted here "
+            f"({trusted.describe()}); if you trust whoever holds that key, add its .pub "
+            "line to the trust store (--trusted-keys), else get a certificate from your "
+            "verifier"
+        )
+    try:
+        raw = base64.b64decode(value, validate=True)
+        message = canonical_bytes(data)
+    except (binascii.Error, ValueError):
+        raw, message = b"", b""
+    if not key.verifies(raw, message):
+        raise CertificateError(
+            f"{path}: the signature by key {kid} does not match the content: the "
+            f"certificate was edited after it was signed; {how}"
+        )
+    return kid
+
+
+def _try_time(text: str) -> dt.datetime | None:
+    try:
+        moment = dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        return None
+    return moment if moment.tzinfo is not None else None
+
+
+def _parse_time(text: str) -> dt.datetime:
+    moment = _try_time(text)
+    if moment is None:
+        raise ValueError(f"not a UTC time: {text}")
+    return moment
+
+
+def parse_expires(text: str, now: dt.datetime) -> dt.datetime:
+    """``--expires``: a number of days from ``now``, or an ISO date (valid through the
+    end of that day, UTC) or time. ValueError, saying what is expected, otherwise or
+    when the moment is not after ``now``."""
+    text = text.strip()
+    moment: dt.datetime | None
+    if text.isdigit():
+        moment = now + dt.timedelta(days=int(text))
+    else:
+        try:
+            day = dt.date.fromisoformat(text)
+        except ValueError:
+            moment = _try_time(text)
+        else:
+            moment = dt.datetime.combine(day, dt.time(23, 59, 59), tzinfo=dt.UTC)
+    if moment is None:
+        raise ValueError(
+            f"expected a number of days or an ISO date (2026-12-31) or UTC time, got {text!r}"
+        )
+    if moment <= now:
+        raise ValueError(f"{text} is not in the future")
+    return moment
 
 
 def _how(path: Path, profile_content: Mapping[str, object] | None) -> str:
@@ -231,7 +528,10 @@ def _how(path: Path, profile_content: Mapping[str, object] | None) -> str:
             bundled = bundled_profile_path(vehicle)
             if bundled is None or bundled.resolve() != Path(file).resolve():
                 option = f" --profile {file}"
-    return f"run 'coral-check verify MISSION{option} --certificate {path}' and fix what it reports"
+    return (
+        f"run 'coral-check verify MISSION{option} --certificate {path} --signing-key KEY' "
+        "and fix what it reports"
+    )
 
 
 def _check_profile(

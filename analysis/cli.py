@@ -5,6 +5,7 @@
     coral-check FILE...          compile, lint and verify each file; text, json, sarif or html
     coral-check lint FILE...     compile and lint only: fast, for pre-commit hooks
     coral-check verify FILE      one file's verification report, and its certificate
+    coral-check keygen --out KEY a key pair to sign certificates with (KEY, KEY.pub)
     coral-check query NET ...    Model Checking Contest queries (analysis.query_cli)
 
 Exit codes (`analysis.outcome`): 0 no errors and every property proven; 1 errors in a
@@ -40,7 +41,14 @@ from coral_lang.diagnostics import ProfileError, render_all
 from coral_lang.loading import is_pnml, load_net_file
 from coral_lang.profile import VehicleProfile, load_profile
 
+SIGNING_KEY_ENV = "CORAL_SIGNING_KEY"
+"""Mirrors `analysis.signing.SIGNING_KEY_ENV`, which is only imported when signing (the
+cryptography package takes time to load, and most runs never sign)."""
+
 if TYPE_CHECKING:
+    import datetime as dt
+
+    from analysis.signing import SigningKey
     from analysis.verify import VerifyOptions
 
 __all__ = [
@@ -48,6 +56,7 @@ __all__ = [
     "EXIT_INCONCLUSIVE",
     "EXIT_OK",
     "EXIT_USAGE",
+    "build_keygen_parser",
     "build_lint_parser",
     "build_parser",
     "build_verify_parser",
@@ -149,7 +158,40 @@ def build_verify_parser() -> argparse.ArgumentParser:
         "--certificate",
         metavar="FILE",
         help="also write the pre-mission certificate (net digest, verdicts, date) here; "
-        "the runtime runs only nets whose certificate says every property was proven",
+        "the runtime runs only nets whose certificate says every property was proven and "
+        "is signed by a key it trusts",
+    )
+    parser.add_argument(
+        "--signing-key",
+        metavar="KEY",
+        help="sign the certificate with this private key (from 'coral-check keygen'; "
+        f"default: ${SIGNING_KEY_ENV}, a key file or the PEM itself); without one the "
+        "certificate is unsigned and no run accepts it",
+    )
+    parser.add_argument(
+        "--expires",
+        metavar="DAYS|DATE",
+        help="the certificate expires after DAYS days, or at the end of DATE (UTC, "
+        "e.g. 2026-12-31); default: never",
+    )
+    return parser
+
+
+def build_keygen_parser() -> argparse.ArgumentParser:
+    """The parser for ``coral-check keygen``."""
+    parser = argparse.ArgumentParser(
+        prog="coral-check keygen",
+        description="Create an Ed25519 key pair for signing certificates: the private key "
+        "in KEY (PEM, mode 0600: keep it with the verifier) and the public key in KEY.pub "
+        "(one line: give it to the operators, whose coral-run trusts it with "
+        "--trusted-keys). Prints the key id. Never overwrites a file.",
+        epilog="exit codes: 0 written, 2 bad usage or a file that exists or cannot be written",
+    )
+    parser.add_argument("--out", required=True, metavar="KEY", help="private key file to create")
+    parser.add_argument(
+        "--comment",
+        metavar="TEXT",
+        help="written after the public key, to tell keys apart (default USER@HOST)",
     )
     return parser
 
@@ -251,9 +293,9 @@ def _add_search_options(parser: argparse.ArgumentParser) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run coral-check; returns the exit code (see the module docstring).
 
-    ``coral-check lint ...`` and ``coral-check verify ...`` are subcommands; anything
-    else is a list of files to lint and verify (name a file called ``lint`` or
-    ``verify`` as ``./lint``).
+    ``coral-check lint ...``, ``coral-check verify ...`` and ``coral-check keygen ...``
+    are subcommands; anything else is a list of files to lint and verify (name a file
+    called ``lint`` or ``verify`` as ``./lint``).
     """
     args_list = list(sys.argv[1:] if argv is None else argv)
     try:
@@ -261,6 +303,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _verify_main(args_list[1:])
         if args_list[:1] == ["lint"]:
             return _check_main(args_list[1:], lint_only=True)
+        if args_list[:1] == ["keygen"]:
+            return _keygen_main(args_list[1:])
         if args_list[:1] == ["query"]:
             from analysis.query_cli import query_main
 
@@ -312,10 +356,12 @@ def _unreadable(file: str) -> str | None:
         return "no such file"
     if path.is_dir():
         return "it is a directory"
+    from coral_lang.safefile import MISSION_LIMIT, PNML_LIMIT, UnreadableFile, read_file_bytes
+
     try:
-        data = path.read_bytes()
-    except OSError as exc:
-        return exc.strerror or str(exc)
+        data = read_file_bytes(path, PNML_LIMIT if is_pnml(path) else MISSION_LIMIT)
+    except UnreadableFile as exc:
+        return exc.reason
     if not is_pnml(path):  # XML declares its own encoding; the PNML reader checks it
         try:
             data.decode("utf-8")
@@ -469,6 +515,10 @@ def _verify_main(argv: list[str]) -> int:
     profiles = _profiles(args.profile)
     if profiles is None:
         return EXIT_USAGE
+    signing = _certificate_settings(args)
+    if signing is None:
+        return EXIT_USAGE
+    key, expires = signing
     result = _load(args.file, profiles)
     if result is None:
         return EXIT_USAGE
@@ -497,15 +547,95 @@ def _verify_main(argv: list[str]) -> int:
         # The certificate records the profile the mission compiled against: the runtime
         # refuses it once that profile changes in anything the mission depends on.
         mission = Mission.from_result(result, Path(args.file), profiles)
-        certificate = make_certificate(report, options, profile_content=mission.profile_content())
+        certificate = make_certificate(
+            report, options, profile_content=mission.profile_content(), expires=expires
+        )
+        if key is not None:
+            from analysis.signing import sign_certificate
+
+            certificate = sign_certificate(certificate, key)
         try:
             write_certificate(certificate, args.certificate)
         except OSError as exc:
             _error(f"cannot write '{args.certificate}': {exc.strerror}")
             return EXIT_USAGE
+        if key is not None:
+            note = f"signed by key {key.public.key_id}"
+        else:
+            note = (
+                "UNSIGNED: no run accepts it; sign with --signing-key KEY "
+                f"(or ${SIGNING_KEY_ENV}), made by 'coral-check keygen --out KEY'"
+            )
+        print(f"coral-check: certificate written to {args.certificate} ({note})", file=sys.stderr)
     if not _write(text, args.output):
         return EXIT_USAGE
     return report.exit_code()
+
+
+def _certificate_settings(
+    args: argparse.Namespace,
+) -> tuple[SigningKey | None, dt.datetime | None] | None:
+    """The signing key and expiry for ``--certificate``, or None (after saying why)
+    when a key cannot be used or ``--expires`` is not a future date. Read before
+    verifying, so a bad key fails in a second, not after a long search."""
+    key: SigningKey | None = None
+    expires: dt.datetime | None = None
+    if not args.certificate:
+        for option in ("signing_key", "expires"):
+            if getattr(args, option) is not None:
+                _error(f"--{option.replace('_', '-')} applies to --certificate FILE; add it")
+                return None
+        return key, expires
+    from analysis.signing import KeyFileError, load_signing_key, signing_key_from_env
+
+    try:
+        if args.signing_key is not None:
+            key = load_signing_key(args.signing_key)
+        else:
+            key = signing_key_from_env(os.environ)
+    except KeyFileError as exc:
+        _error(str(exc))
+        return None
+    if args.expires is not None:
+        import datetime as dt
+
+        from analysis.certificate import parse_expires
+
+        try:
+            expires = parse_expires(args.expires, dt.datetime.now(dt.UTC))
+        except ValueError as exc:
+            _error(f"--expires: {exc}")
+            return None
+    return key, expires
+
+
+# -- coral-check keygen ---------------------------------------------------------------------
+
+
+def _keygen_main(argv: list[str]) -> int:
+    import getpass
+    import socket
+
+    from analysis.signing import KeyFileError, generate_key_files, public_path
+
+    args = _parse(build_keygen_parser(), argv)
+    if isinstance(args, int):
+        return args
+    comment = args.comment
+    if comment is None:
+        try:
+            comment = f"{getpass.getuser()}@{socket.gethostname()}"
+        except (OSError, KeyError):
+            comment = "coral"
+    try:
+        public = generate_key_files(args.out, comment)
+    except KeyFileError as exc:
+        _error(str(exc))
+        return EXIT_USAGE
+    print(f"key id: {public.key_id}")
+    print(f"private key: {args.out} (keep it secret; the verifier signs with it)")
+    print(f"public key: {public_path(Path(args.out))} (give it to operators: --trusted-keys)")
+    return EXIT_OK
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ All errors of all files are collected before anything is reported.
 from __future__ import annotations
 
 import difflib
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -47,6 +48,7 @@ from coral_lang.parser import parse
 from coral_lang.printer import format_temporal
 from coral_lang.profile import CommandSpec, ParamSpec, VehicleProfile, load_bundled_profile
 from coral_lang.properties import Names, PropertyLowering, TransitionInfo
+from coral_lang.safefile import MISSION_LIMIT, UnreadableFile, is_within, read_text_file
 
 PENDING_SUFFIX = ".pending"
 FREE_SUFFIX = ".free"
@@ -82,16 +84,23 @@ class CompileResult:
         return self.net
 
 
-def compile_file(path: str | Path, profiles: Sequence[VehicleProfile] = ()) -> CompileResult:
+def compile_file(
+    path: str | Path,
+    profiles: Sequence[VehicleProfile] = (),
+    *,
+    include_root: str | Path | None = None,
+) -> CompileResult:
     """Compile the mission in ``path`` (and the files it includes).
 
     Args:
         path: the mission file.
         profiles: vehicle profiles to use before the bundled ones (matched by vehicle name).
+        include_root: the folder every included file must lie in (symlinks followed);
+            default: the folder of ``path``. An include outside it is an error.
     """
     path = Path(path)
     with cyclic_gc_paused():
-        compiler = _Compiler(profiles)
+        compiler = _Compiler(profiles, Path(include_root) if include_root is not None else None)
         compiler.load_root(path)
         return compiler.finish()
 
@@ -101,11 +110,17 @@ def compile_source(
     file: str = "<mission>",
     profiles: Sequence[VehicleProfile] = (),
     base_dir: str | Path | None = None,
+    *,
+    include_root: str | Path | None = None,
 ) -> CompileResult:
-    """Compile mission ``text``; includes resolve against ``base_dir`` (default: cwd)."""
+    """Compile mission ``text``; includes resolve against ``base_dir`` (default: cwd).
+
+    Included files must lie in ``include_root`` (default: ``base_dir``).
+    """
+    base = Path(base_dir) if base_dir is not None else Path.cwd()
     with cyclic_gc_paused():
-        compiler = _Compiler(profiles)
-        compiler.load_text(text, file, Path(base_dir) if base_dir is not None else Path.cwd())
+        compiler = _Compiler(profiles, Path(include_root) if include_root is not None else base)
+        compiler.load_text(text, file, base)
         return compiler.finish()
 
 
@@ -132,8 +147,13 @@ class _ConstInfo:
 
 
 class _Compiler:
-    def __init__(self, profiles: Sequence[VehicleProfile]) -> None:
+    def __init__(
+        self, profiles: Sequence[VehicleProfile], include_root: Path | None = None
+    ) -> None:
         self.profiles = list(profiles)
+        # Every included file must lie below this folder (resolved); None: the root
+        # mission's folder, set when it is loaded.
+        self.include_root = include_root.resolve() if include_root is not None else None
         self.diagnostics: list[Diagnostic] = []
         self.sources: dict[str, str] = {}
         self.missions: list[ast.Mission] = []
@@ -148,21 +168,23 @@ class _Compiler:
     def load_root(self, path: Path) -> None:
         text = self._read(path, None)
         if text is not None:
-            self.load_text(text, str(path), path.resolve().parent, resolved=path.resolve())
+            resolved = path.resolve()
+            if self.include_root is None:
+                self.include_root = resolved.parent
+            self.load_text(text, str(path), resolved.parent, resolved=resolved)
 
     def _read(self, path: Path, span: Span | None) -> str | None:
         try:
-            return path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            self.error("CORAL004", f"file not found: {path}", span)
-        except IsADirectoryError:
-            self.error("CORAL004", f"is a directory, not a mission file: {path}", span)
-        except UnicodeDecodeError as exc:
-            self.error(
-                "CORAL004", f"not UTF-8 text: {path} ({exc.reason} at byte {exc.start})", span
-            )
-        except OSError as exc:
-            self.error("CORAL004", f"cannot read {path}: {exc.strerror}", span)
+            return read_text_file(path, MISSION_LIMIT)
+        except UnreadableFile as exc:
+            if exc.kind == "missing":
+                self.error("CORAL004", f"file not found: {_clip(str(path))}", span)
+            elif exc.kind == "directory":
+                self.error(
+                    "CORAL004", f"is a directory, not a mission file: {_clip(str(path))}", span
+                )
+            else:
+                self.error("CORAL004", f"cannot read {_clip(exc.path)}: {exc.reason}", span)
         return None
 
     def load_text(
@@ -186,7 +208,9 @@ class _Compiler:
                 self.declarations.append((declaration, file))
 
     def _include(self, include: ast.Include, base_dir: Path, stack: tuple[Path, ...]) -> None:
-        target = (base_dir / include.path).resolve()
+        target = self._include_target(include, base_dir)
+        if target is None:
+            return
         if target in stack:
             chain = " -> ".join(p.name for p in (*stack, target))
             self.error("CORAL004", f"include cycle: {chain}", include.span)
@@ -197,6 +221,33 @@ class _Compiler:
         if text is None:
             return
         self.load_text(text, _display_path(target), target.parent, resolved=target, stack=stack)
+
+    def _include_target(self, include: ast.Include, base_dir: Path) -> Path | None:
+        """The resolved file ``include`` names, or None (reported) when it is refused.
+
+        Included files must lie in the include root (the root mission's folder unless
+        given), after symlinks are followed: a mission must not read, and quote in its
+        error messages, files elsewhere (``include "/proc/self/environ"``).
+        """
+        shown = _clip(include.path if include.path.isprintable() else repr(include.path))
+        if "\0" in include.path:
+            self.error("CORAL004", f"include path holds a NUL character: {shown}", include.span)
+            return None
+        try:
+            target = (base_dir / include.path).resolve()
+        except (OSError, RuntimeError, ValueError) as exc:  # RuntimeError: symlink loop
+            self.error("CORAL004", f"cannot include {shown}: {exc}", include.span)
+            return None
+        root = self.include_root if self.include_root is not None else base_dir.resolve()
+        if not is_within(target, root):
+            self.error(
+                "CORAL004",
+                f"include {shown} is outside the mission's folder {root}",
+                include.span,
+                "included files must lie in the folder of the mission being checked (or below it)",
+            )
+            return None
+        return target
 
     # -- checking and lowering ------------------------------------------------------------
 
@@ -779,6 +830,11 @@ class _Compiler:
                     *via,
                 )
                 return None
+            if not math.isfinite(number):  # 1e308 km: finite as written, not in metres
+                self.error(
+                    "CORAL105", f"{label} is out of range, got {_show(resolved)}", where, *via
+                )
+                return None
             if param.type == "int":
                 if not float(number).is_integer():
                     self.error(
@@ -934,6 +990,11 @@ def _show(value: ast.Number | ast.String) -> str:
         return f'text "{value.value}"'
     unit = f" {value.unit}" if value.unit else ""
     return f"{value.value!r}{unit}"
+
+
+def _clip(text: str, width: int = 200) -> str:
+    """``text`` (a path) cut to ``width`` characters: a message stays a line or two."""
+    return text if len(text) <= width else text[: width - 3] + "..."
 
 
 def _display_path(path: Path) -> str:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import difflib
 import enum
+import functools
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -80,25 +81,107 @@ class Diagnostic:
         }
 
 
+EXCERPT_WIDTH = 120
+"""Most characters of a source line an excerpt shows; a longer line is cut to a window
+around the column, marked with ``...``, so a 40 KB line costs 120 characters per error."""
+
+MAX_RENDERED_PER_FILE = 100
+"""Most diagnostics `render_all` writes out per file; the rest are counted in one line.
+A garbage file can hold a million errors, and nobody reads past the first screens."""
+
+_LINE_STARTS_CACHE = 8  # sources whose line offsets are kept (one compile has a few)
+
+
+@functools.lru_cache(maxsize=_LINE_STARTS_CACHE)
+def _line_starts(text: str) -> tuple[int, ...]:
+    """Offsets where each line of ``text`` starts, split only at ``\\n`` as the lexer does.
+
+    Computed once per source (a str caches its hash, so the lookup is cheap): rendering
+    each diagnostic used to re-split the whole file, quadratic on big garbage inputs.
+    Other line breaks (``\\u2028``, ``\\x0c``...) are not line ends for the lexer, so
+    they are not here either, or the excerpt would show another line than the error's.
+    """
+    starts = [0]
+    find = text.find
+    position = find("\n")
+    while position != -1:
+        starts.append(position + 1)
+        position = find("\n", position + 1)
+    return tuple(starts)
+
+
+def source_line(text: str, line: int) -> str | None:
+    """Line ``line`` (from 1) of ``text`` as the lexer counts lines; None past the end."""
+    starts = _line_starts(text)
+    if not 1 <= line <= len(starts):
+        return None
+    start = starts[line - 1]
+    end = starts[line] - 1 if line < len(starts) else len(text)
+    return text[start:end].removesuffix("\r")
+
+
+def _printable(text: str) -> str:
+    """``text`` with tabs as one space and other unprintable characters as ``?``.
+
+    One character out per character in, so the caret stays under the column; and no
+    control or escape sequence from a hostile file reaches the terminal.
+    """
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else " " if c == "\t" else "?" for c in text)
+
+
 def _excerpt(text: str, span: Span) -> list[str]:
-    source_lines = text.splitlines()
-    if not 1 <= span.line <= len(source_lines):
+    line = source_line(text, span.line)
+    if line is None:
         return []
-    line = source_lines[span.line - 1].expandtabs(1)
-    width = len(str(span.line))
     end = span.end_col if span.end_line == span.line else len(line) + 1
-    length = max(1, min(end, len(line) + 1) - span.col)
+    col = min(max(span.col, 1), len(line) + 1)
+    length = max(1, min(end, len(line) + 1) - col)
+    prefix = suffix = ""
+    if len(line) > EXCERPT_WIDTH:
+        start = min(max(0, col - 1 - EXCERPT_WIDTH // 3), len(line) - EXCERPT_WIDTH)
+        stop = start + EXCERPT_WIDTH
+        prefix = "..." if start > 0 else ""
+        suffix = "..." if stop < len(line) else ""
+        line = line[start:stop]
+        col -= start  # now within the window
+        length = max(1, min(length, len(line) + 1 - col))
+        col += len(prefix)
+    shown = prefix + _printable(line) + suffix
+    width = len(str(span.line))
     gutter = " " * width
     return [
         f" {gutter} |",
-        f" {span.line} | {line}",
-        f" {gutter} | {' ' * (span.col - 1)}^{'~' * (length - 1)}",
+        f" {span.line} | {shown}",
+        f" {gutter} | {' ' * (col - 1)}^{'~' * (length - 1)}",
     ]
 
 
-def render_all(diagnostics: Iterable[Diagnostic], sources: Mapping[str, str] | None = None) -> str:
-    """Render several diagnostics, separated by blank lines, in source order."""
-    return "\n\n".join(d.render(sources) for d in sort_diagnostics(diagnostics))
+def render_all(
+    diagnostics: Iterable[Diagnostic],
+    sources: Mapping[str, str] | None = None,
+    limit: int = MAX_RENDERED_PER_FILE,
+) -> str:
+    """Render several diagnostics, separated by blank lines, in source order.
+
+    At most ``limit`` per file are written out, then one line counts the others: the
+    output stays readable, and bounded, however broken the input.
+    """
+    blocks: list[str] = []
+    shown: dict[str, int] = {}
+    hidden: dict[str, int] = {}
+    for d in sort_diagnostics(diagnostics):
+        file = d.span.file if d.span else ""
+        if shown.get(file, 0) >= limit:
+            hidden[file] = hidden.get(file, 0) + 1
+            continue
+        shown[file] = shown.get(file, 0) + 1
+        blocks.append(d.render(sources))
+    for file, count in hidden.items():
+        where = f" in {file}" if file else ""
+        blocks.append(f"... and {count} more diagnostic{'s' if count != 1 else ''}{where}")
+    return "\n\n".join(blocks)
 
 
 def sort_diagnostics(diagnostics: Iterable[Diagnostic]) -> list[Diagnostic]:

@@ -101,11 +101,21 @@ _LINE_TOKENS = re.compile(
     | ("(?:[^"\\\n]|\\.)*"?)                           # string (maybe unterminated)
     | (->|<=|>=|==|!=|[{}(),=*:/<>+.\[\]-])             # punctuation
     | (\#.*)                                           # comment, to the end of the line
-    | (.)                                              # anything else: an error
+    | ([^\w\s"\#{}(),=*:/<>+.\[\]!-]+|.)                # anything else: an error (a run
+                                                       # of them is one error, not many)
     )
     """,
     re.VERBOSE,
 )
+MAX_LEXER_ERRORS = 50
+"""Bad-character errors after which the lexer stops reading a file: by then it is not
+a mission (a binary, a stray YAML file), and a million errors would only cost memory."""
+
+MAX_NUMBER_DIGITS = 40
+"""Longest number literal (in characters) the lexer accepts. Every number in a mission
+is a count, a weight or a parameter; 40 characters is far beyond any, and refusing
+longer ones here keeps Python's int() from failing (or taking long) on 5,000 digits."""
+
 _ESCAPE = re.compile(r"\\(.)")
 _ESCAPES = {'"': '"', "\\": "\\", "n": "\n", "t": "\t"}
 
@@ -144,7 +154,7 @@ def tokenize(text: str, file: str) -> tuple[list[Token], list[Diagnostic]]:
     # tuple's own constructor is a Python function: twice the cost per token).
     new, token_cls, ident_kind, punctuation = tuple.__new__, Token, Kind.IDENT, _PUNCTUATION
     findall = _LINE_TOKENS.findall
-    line = 0
+    line = errors = 0
     # Line by line: strings and comments never span lines.
     for line, text_line in enumerate(text.split("\n"), start=1):
         offset = 0
@@ -160,6 +170,18 @@ def tokenize(text: str, file: str) -> tuple[list[Token], list[Diagnostic]]:
             elif number:
                 offset = col - 1 + len(number)
                 kind = Kind.INT if number.isdigit() else Kind.FLOAT
+                if len(number) > MAX_NUMBER_DIGITS:
+                    span = Span(file, line, col, line, offset + 1)
+                    diagnostics.append(
+                        Diagnostic(
+                            Severity.ERROR,
+                            "CORAL001",
+                            f"number too long ({len(number)} characters; at most"
+                            f" {MAX_NUMBER_DIGITS})",
+                            span,
+                        )
+                    )
+                    kind = Kind.ERROR  # the parser stays quiet on it: reported here
                 append(new(token_cls, (kind, number, file, line, col, line, offset + 1)))
             elif comment:
                 break
@@ -179,11 +201,28 @@ def tokenize(text: str, file: str) -> tuple[list[Token], list[Diagnostic]]:
             else:
                 offset = col - 1 + len(error)
                 span = Span(file, line, col, line, offset + 1)
-                shown = error if error.isprintable() else repr(error)
+                shown = error if len(error) <= 20 else error[:20] + "..."
+                shown = f"'{shown}'" if shown.isprintable() else repr(shown)
+                plural = "s" if len(error) > 1 else ""
                 diagnostics.append(
-                    Diagnostic(Severity.ERROR, "CORAL001", f"unexpected character '{shown}'", span)
+                    Diagnostic(
+                        Severity.ERROR, "CORAL001", f"unexpected character{plural} {shown}", span
+                    )
                 )
                 append(Token(Kind.ERROR, error, *span))
+                errors += 1
+                if errors >= MAX_LEXER_ERRORS:
+                    diagnostics.append(
+                        Diagnostic(
+                            Severity.ERROR,
+                            "CORAL001",
+                            f"{errors} bad characters: stopped reading the file here"
+                            " (is it a CORAL mission?)",
+                            span,
+                        )
+                    )
+                    append(Token(Kind.EOF, "", file, line, offset + 1, line, offset + 2))
+                    return tokens, diagnostics
     last = text.rsplit("\n", 1)[-1]
     col = len(last) + 1
     append(Token(Kind.EOF, "", file, max(line, 1), col, max(line, 1), col + 1))

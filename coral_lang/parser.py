@@ -6,6 +6,7 @@ one run reports every error of a file. The grammar is in ``docs/language.md``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 from coral_lang import ast, units
@@ -13,6 +14,15 @@ from coral_lang.diagnostics import Diagnostic, Severity, Span, did_you_mean
 from coral_lang.gcpause import cyclic_gc_paused
 from coral_lang.lexer import KEYWORDS, STATEMENT_KEYWORDS, Kind, Token, tokenize
 from coral_lang.printer import format_expr
+
+MAX_WHOLE = 2**63 - 1
+"""Largest whole number a mission may write: counts and weights are 64-bit integers in
+the engines and in PNML exports, and larger ones are never meant."""
+
+MAX_ERRORS = 99
+"""Diagnostics after which the parser gives up on a file: a file with that many syntax
+errors is not a mission, and going on only costs time and memory. One below the 100
+diagnostics `render_all` shows per file, so the "stopped" note is always shown."""
 
 _TEMPORAL_KINDS = ("always", "eventually", "ltl", "ctl")
 _ASSERT_KINDS = ("never", "reachable", "bound", *_TEMPORAL_KINDS)
@@ -141,6 +151,16 @@ class _Parser:
         name_span = vehicle_span = Span(self.file, 1, 1, 1, 1)
         declarations: list[ast.Declaration] = []
         while not self.at(Kind.EOF):
+            if len(self.diagnostics) >= MAX_ERRORS:
+                self.diagnostics.append(
+                    Diagnostic(
+                        Severity.ERROR,
+                        "CORAL001",
+                        f"{len(self.diagnostics)} errors: stopped reading the file here",
+                        self.tok.span,
+                    )
+                )
+                break
             start = self.pos
             try:
                 if self.at_keyword("mission"):
@@ -224,13 +244,33 @@ class _Parser:
         minus = self.accept(Kind.MINUS)
         if not (self.at(Kind.INT) or self.at(Kind.FLOAT)):
             raise self.error(f"expected a number {context}, found {self.tok.describe()}")
-        token = self.advance()
-        value: int | float = int(token.text) if token.kind is Kind.INT else float(token.text)
+        token = self.tok
+        value = self.numeric(token)
+        self.advance()
         if minus is not None:
             value = -value
         start = minus.span if minus is not None else token.span
         unit = self.unit(token)
         return ast.Number(value, unit, _join(start, self.previous))
+
+    def numeric(self, token: Token) -> int | float:
+        """The value of number ``token``, refused (at the token) when out of range.
+
+        Whole numbers are token counts, weights, priorities or parameters, all stored as
+        64-bit integers by the engines and in PNML; a float that overflows to infinity
+        (``1e400``) would silently compare larger than any bound.
+        """
+        if token.kind is Kind.INT:
+            whole = int(token.text)  # the lexer caps the length, so this is cheap
+            if whole > MAX_WHOLE:
+                raise self.error(
+                    f"number too large: {token.text} (at most {MAX_WHOLE})", token.span
+                )
+            return whole
+        real = float(token.text)
+        if not math.isfinite(real):
+            raise self.error(f"number out of range: {token.text}", token.span)
+        return real
 
     def unit(self, number: Token) -> str | None:
         """A unit written right after a number on the same line (``2.0 m``, ``0.5 m/s``)."""
@@ -549,8 +589,9 @@ class _Parser:
     def term(self) -> ast.TokenRef | ast.Number:
         token = self.tok
         if token.kind is Kind.INT:
+            value = self.numeric(token)
             self.advance()
-            return ast.Number(int(token.text), None, token.span)
+            return ast.Number(value, None, token.span)
         if token.kind is Kind.FLOAT or token.kind is Kind.MINUS:
             raise self.error(
                 f"token counts are whole numbers of at least 0, found {token.describe()}"

@@ -46,6 +46,7 @@ from coral_lang.net import (
     TransitionKind,
     Value,
 )
+from coral_lang.safefile import PNML_LIMIT, UnreadableFile, read_file_bytes
 from coral_lang.safexml import SafeExpatParser
 
 __all__ = [
@@ -58,6 +59,7 @@ __all__ = [
     "to_pnml",
     "write_pnml",
 ]
+
 
 PNML_NAMESPACE = "http://www.pnml.org/version-2009/grammar/pnml"
 PTNET_TYPE = "http://www.pnml.org/version-2009/grammar/ptnet"
@@ -74,7 +76,9 @@ _KNOWN_TYPES = {
 _HIGH_LEVEL = frozenset(
     {"declaration", "declarations", "hlinitialMarking", "hlinscription", "condition"}
 )
-_INTEGER = re.compile(r"[+-]?[0-9]+", re.ASCII)
+_INTEGER = re.compile(r"[+-]?[0-9]{1,19}", re.ASCII)
+"""At most 19 digits: every count and weight fits in 64 bits (a 5,000-digit one would
+make ``int()`` raise, far past the analyses' own 2**63 limit)."""
 # Ids written verbatim: a conservative, ASCII-only subset of XML's NCName that every PNML
 # tool accepts. Other names get a sanitised id; their real name rides in a coral block.
 _SAFE_ID = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*", re.ASCII)
@@ -179,11 +183,10 @@ def read_pnml(path: str | os.PathLike[str], *, net_id: str | None = None) -> Net
         PnmlError: The file cannot be read, is not well-formed or safe XML, is not a P/T
             net, or is inconsistent. The message names the file, line and element.
     """
-    try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except OSError as e:
-        raise PnmlError(f"{os.fspath(path)}: cannot read: {e.strerror or e}") from e
+    try:  # regular files only, at most PNML_LIMIT bytes: never a FIFO or /dev/zero
+        data = read_file_bytes(path, PNML_LIMIT)
+    except UnreadableFile as e:
+        raise PnmlError(f"{e.path}: cannot read: {e.reason}") from None
     return parse_pnml(data, os.fspath(path), net_id=net_id)
 
 
@@ -468,8 +471,10 @@ class _Reader:
             raise self.error(element, f"{what} has no <text>")
         raw = text.text.strip()
         if not _INTEGER.fullmatch(raw):
-            raise self.error(text, f"{what} is '{raw}', not an integer")
+            raise self.error(text, f"{what} is '{_short(raw)}', not an integer below 2**63")
         value = int(raw)
+        if value >= 2**63:
+            raise self.error(text, f"{what} is {value}: it must be below 2**63")
         if value < minimum:
             if minimum == 0:
                 raise self.error(text, f"{what} is {value}: it must not be negative")
@@ -567,9 +572,13 @@ class _Reader:
             return None
         if not _INTEGER.fullmatch(raw.strip()):
             raise self.error(
-                element, f"coral <{element.tag}> {attribute} '{raw}' is not an integer"
+                element,
+                f"coral <{element.tag}> {attribute} '{_short(raw)}' is not an integer below 2**63",
             )
-        return int(raw)
+        value = int(raw)
+        if value >= 2**63:
+            raise self.error(element, f"coral <{element.tag}> {attribute} must be below 2**63")
+        return value
 
     def required(self, element: _Element, attribute: str) -> str:
         raw = element.attrs.get(attribute)
@@ -981,3 +990,8 @@ def _net_block(net: Net, ident: str) -> list[str]:
         body = _span_line(assertion.span) + _token_lines(assertion.places)
         lines += [head[:-2] + ">", *("  " + line for line in body), "</assertion>"]
     return _block(lines)
+
+
+def _short(raw: str) -> str:
+    """``raw`` cut to a readable length for a message."""
+    return raw if len(raw) <= 40 else raw[:37] + "..."

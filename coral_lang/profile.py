@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 from dataclasses import dataclass
 from importlib import resources as importlib_resources
 from pathlib import Path
@@ -17,6 +18,7 @@ from typing import Literal, cast
 
 from coral_lang import units
 from coral_lang.diagnostics import ProfileError, did_you_mean
+from coral_lang.safefile import PROFILE_LIMIT, UnreadableFile, read_text_file
 from coral_lang.yamlsource import Plain, YamlDocument, expect_keys, load_yaml
 
 ParamType = Literal["float", "int", "string"]
@@ -144,8 +146,18 @@ class VehicleProfile:
         return tuple(c.name for c in self.commands)
 
 
+_PROFILE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")
+
+
 def bundled_profile_path(system: str) -> Path | None:
-    """Path of the bundled profile for ``system`` (``ROMEO`` -> ``romeo.yaml``), if any."""
+    """Path of the bundled profile for ``system`` (``ROMEO`` -> ``romeo.yaml``), if any.
+
+    ``system`` becomes a file name, so only plain names of up to 64 characters are
+    looked up: a 300-character vehicle name made the file system raise "file name too
+    long", and a name with ``/`` or ``..`` must never reach outside the folder.
+    """
+    if not _PROFILE_NAME.fullmatch(system) or ".." in system:
+        return None
     candidate = importlib_resources.files("coral_lang") / "profiles" / f"{system.lower()}.yaml"
     path = Path(str(candidate))
     return path if path.is_file() else None
@@ -166,9 +178,9 @@ def load_profile(path: str | Path) -> VehicleProfile:
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ProfileError(str(path), "", f"cannot read profile: {exc}") from None
+        text = read_text_file(path, PROFILE_LIMIT)  # regular files only, at most 1 MB
+    except UnreadableFile as exc:
+        raise ProfileError(str(path), "", f"cannot read profile: {exc.reason}") from None
     return parse_profile(text, str(path))
 
 

@@ -8,6 +8,7 @@ each value's path to its line and column.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -40,9 +41,37 @@ class YamlDocument:
         return ProfileError(where, path, message)
 
 
+MAX_YAML_CHARS = 1_000_000
+"""Largest YAML document (in characters) coral reads: profiles are a few KB."""
+
+MAX_YAML_DEPTH = 100
+"""Deepest nesting of mappings and lists accepted; profiles need four or five levels,
+and a document nested thousands deep is an attack on the recursive tree builder."""
+
+_STANDARD = "tag:yaml.org,2002:"
+_ALLOWED_TAGS = frozenset(
+    {None, "!", *(_STANDARD + t for t in ("str", "int", "float", "bool", "null", "map", "seq"))}
+)
+_INTEGER_LIMIT = 2**63
+"""Whole numbers in a profile are bounds and counts; anything this large is a mistake
+(and a 5,000-digit one would make Python's int() raise)."""
+_MAX_INT_CHARS = 40  # longer than any int below _INTEGER_LIMIT, with signs and underscores
+
+
 def load_yaml(text: str, file: str) -> YamlDocument:
-    """Parse ``text`` safely (plain data only) and record positions of every path."""
+    """Parse ``text`` safely (plain data only) and record positions of every path.
+
+    Refused, with ``file:line:col``: anchors and aliases (a 1 KB "billion laughs"
+    document expands to gigabytes), nesting deeper than `MAX_YAML_DEPTH`, any tag but
+    the standard scalar and collection ones (``!!python/name`` and friends are refused,
+    not silently read as text), and documents over `MAX_YAML_CHARS` characters.
+    """
+    if len(text) > MAX_YAML_CHARS:
+        raise ProfileError(
+            file, "", f"too large: {len(text)} characters (at most {MAX_YAML_CHARS})"
+        )
     try:
+        _screen(text, file)
         node = yaml.compose(text, Loader=_LOADER)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
@@ -54,6 +83,38 @@ def load_yaml(text: str, file: str) -> YamlDocument:
         return document
     document.data = _build(node, "", document)
     return document
+
+
+def _screen(text: str, file: str) -> None:
+    """Refuse what `load_yaml` refuses, from the parser's event stream, before any tree.
+
+    The events come from the (iterative) parser: no alias is ever expanded and no deep
+    recursion happens before the document is known to be plain, shallow data.
+    """
+    depth = 0
+    for event in yaml.parse(text, Loader=_LOADER):
+        mark = event.start_mark
+        where = f"{file}:{mark.line + 1}:{mark.column + 1}" if mark is not None else file
+        if isinstance(event, yaml.AliasEvent):
+            raise ProfileError(
+                where, "", f"aliases (*{event.anchor}) are not supported: write the value out"
+            )
+        if isinstance(event, yaml.NodeEvent) and event.anchor is not None:
+            raise ProfileError(
+                where, "", f"anchors (&{event.anchor}) are not supported: write values out"
+            )
+        tag: str | None = getattr(event, "tag", None)
+        if tag is not None and tag not in _ALLOWED_TAGS:
+            shown = "!!" + tag.removeprefix(_STANDARD) if tag.startswith(_STANDARD) else tag
+            raise ProfileError(
+                where, "", f"tag '{shown}' is not supported: profiles hold plain data only"
+            )
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > MAX_YAML_DEPTH:
+                raise ProfileError(where, "", f"nested deeper than {MAX_YAML_DEPTH} levels")
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
 
 
 def _build(node: yaml.Node, path: str, document: YamlDocument) -> Plain:
@@ -76,18 +137,37 @@ def _build(node: yaml.Node, path: str, document: YamlDocument) -> Plain:
     if isinstance(node, yaml.SequenceNode):
         return [_build(item, f"{path}[{i}]", document) for i, item in enumerate(node.value)]
     assert isinstance(node, yaml.ScalarNode)
-    return _scalar(node)
+    return _scalar(node, path, document)
 
 
-def _scalar(node: yaml.ScalarNode) -> Plain:
+def _scalar(node: yaml.ScalarNode, path: str, document: YamlDocument) -> Plain:
+    if node.tag == _STANDARD + "int" and len(node.value) > _MAX_INT_CHARS:
+        raise document.error(path, f"number too long: {_clip(node.value)}")
     loader = yaml.SafeLoader("")
     try:
         value = loader.construct_object(node, deep=True)
+    except (ValueError, OverflowError, yaml.YAMLError) as exc:
+        # An impossible date (2001-13-45), a 5,000-digit integer: a message, no traceback.
+        reason = getattr(exc, "problem", None) or str(exc).split("\n")[0][:100]
+        raise document.error(path, f"cannot read value '{_clip(node.value)}': {reason}") from None
     finally:
         loader.dispose()
-    if isinstance(value, str | int | float | bool) or value is None:
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return value
+    if isinstance(value, int):
+        if not -_INTEGER_LIMIT < value < _INTEGER_LIMIT:
+            raise document.error(path, f"number too large: {_clip(node.value)}")
+        return value
+    if isinstance(value, float):
+        if math.isinf(value) and "inf" not in node.value.lower():
+            raise document.error(path, f"number out of range: {_clip(node.value)}")
         return value
     return str(value)
+
+
+def _clip(text: str, width: int = 40) -> str:
+    """``text`` cut to ``width`` characters for a message."""
+    return text if len(text) <= width else text[:width] + "..."
 
 
 def expect_keys(

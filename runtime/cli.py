@@ -117,7 +117,17 @@ def build_run_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--verify",
         action="store_true",
-        help="if there is no passing certificate, verify the mission and issue one",
+        help="if there is no passing certificate, verify the mission here and run on that "
+        "verification (no key needed; the certificate it writes is unsigned, so a later "
+        "run needs --verify again or a signed certificate)",
+    )
+    parser.add_argument(
+        "--trusted-keys",
+        type=Path,
+        metavar="PATH",
+        help="public keys whose signed certificates are accepted: a file of "
+        "'coral-ed25519 ...' lines or a folder of .pub files (default "
+        "~/.config/coral/trusted_keys if it exists)",
     )
     parser.add_argument("--key-file", type=Path, metavar="FILE", help="pre-shared key, hex")
     parser.add_argument("--key-hex", metavar="HEX", help="pre-shared key (prefer --key-file)")
@@ -191,7 +201,7 @@ def _run(options: argparse.Namespace) -> int:
 
     from coral_lang.profile import load_profile
     from runtime.eventlog import EventLog
-    from runtime.gate import approve_mission
+    from runtime.gate import approve_mission, trust_store
     from runtime.keys import load_psk
     from runtime.link import load_link_profile
     from runtime.run import RunConfig, controller_log_path, resume_mission, run_mission
@@ -225,15 +235,20 @@ def _run(options: argparse.Namespace) -> int:
         out_dir = options.resume.parent
         if not profiles:
             profiles = [load_profile(path) for path in _recorded_profiles(options.resume)]
+    trusted = trust_store(options.trusted_keys)
     approved = approve_mission(
-        mission_path, options.certificate, issue=options.verify, profiles=profiles
+        mission_path, options.certificate, issue=options.verify, profiles=profiles, trusted=trusted
     )
     # The net and the compiler's objects live as long as the run: take them out of the
     # cyclic collector's scans, which otherwise grow with the net (bench/engine.py).
     gc.collect()
     gc.freeze()
     if approved.issued_now:
-        print(f"coral-run: verified; certificate written to {approved.approval.path}")
+        print(
+            f"coral-run: verified; certificate written to {approved.approval.path} (unsigned: "
+            "this run trusts its own verification; a later run needs --verify again, or a "
+            "certificate signed with 'coral-check verify --signing-key')"
+        )
     console = (lambda line: None) if options.quiet else print
     config = RunConfig(
         out_dir=out_dir,

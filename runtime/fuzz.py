@@ -57,6 +57,7 @@ from runtime.vehicle.model import VehicleModel
 from runtime.vehicle.options import add_simulation_arguments, fault_plan_from_args
 
 if TYPE_CHECKING:
+    from analysis.signing import TrustStore
     from coral_lang.profile import VehicleProfile
     from runtime.faultplan import FaultPlan
 
@@ -894,6 +895,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="the mission's certificate (default MISSION.certificate.json beside it)",
     )
     parser.add_argument(
+        "--trusted-keys",
+        type=Path,
+        metavar="PATH",
+        help="public keys whose signed certificates are accepted: a file of "
+        "'coral-ed25519 ...' lines or a folder of .pub files (default "
+        "~/.config/coral/trusted_keys if it exists)",
+    )
+    parser.add_argument(
         "--unverified",
         action="store_true",
         help="fuzz a mission that has no passing certificate (simulator only; a warning "
@@ -936,12 +945,17 @@ def _probability(text: str) -> float:
 
 
 def approval_for(
-    mission: Mission, certificate: Path | None, *, unverified: bool
+    mission: Mission,
+    certificate: Path | None,
+    *,
+    unverified: bool,
+    trusted: TrustStore | None = None,
 ) -> tuple[CertificateCheck, str | None]:
     """The approval to fuzz with, and the reason it is unverified (None if verified).
 
-    The certificate is checked as a run checks it: against the net and the vehicle
-    profile the mission was compiled with.
+    The certificate is checked as a run checks it: against the net, the vehicle profile
+    the mission was compiled with, and the trusted keys (``trusted``, default the
+    run's default trust store), so it must be signed.
 
     Raises:
         CertificateError: no passing certificate and not ``unverified``.
@@ -950,7 +964,7 @@ def approval_for(
 
     net = mission.net
     try:
-        return check_mission_certificate(mission, certificate), None
+        return check_mission_certificate(mission, certificate, trusted=trusted), None
     except CertificateError as exc:
         if not unverified:
             raise CertificateError(
@@ -988,8 +1002,13 @@ def _fuzz(options: argparse.Namespace, err: IO[str]) -> int:
     if options.vary_replies > 0.0:
         vary = parse_fault_rules([f"*=any@{options.vary_replies:g}"], source="--vary-replies")
         faults = vary if faults is None else faults + vary
+    from runtime.gate import trust_store
+
     approval, unverified = approval_for(
-        compiled, options.certificate, unverified=options.unverified
+        compiled,
+        options.certificate,
+        unverified=options.unverified,
+        trusted=trust_store(options.trusted_keys),
     )
     if unverified is not None:
         print(
@@ -1061,6 +1080,8 @@ def _command(options: argparse.Namespace) -> str:
         parts += ["--vary-replies", f"{options.vary_replies:g}"]
     if options.certificate is not None:
         parts += ["--certificate", str(options.certificate)]
+    if options.trusted_keys is not None:
+        parts += ["--trusted-keys", shlex.quote(str(options.trusted_keys))]
     if options.unverified:
         parts.append("--unverified")
     if options.policy != Policy.RANDOM.value:

@@ -8,10 +8,20 @@ The mission is compiled against the vehicle profiles the user gave (``--profile`
 before the bundled ones, and the certificate must cover the profile it compiled
 against: one issued for an older version of the profile, or before certificates
 recorded profiles at all, is refused (`analysis.certificate.check_certificate`).
+
+A run accepts only a certificate signed by a key in its trust store (``trusted``:
+``--trusted-keys``, else ``~/.config/coral/trusted_keys``; `analysis.signing`). With
+``issue=True`` (``coral-run --verify``) the gate has just verified the net itself, in
+this process: it signs the certificate it made with a key generated for this call alone
+and checks it, in memory, against a store holding only that key, so the run goes through
+exactly the checks a signed certificate does. That key is never written anywhere; the
+certificate written to disk is unsigned, so a later run with it is refused unless it
+verifies again (``--verify``) or the certificate is signed by a trusted verifier.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,9 +30,11 @@ from analysis.certificate import (
     CertificateCheck,
     CertificateError,
     check_certificate,
+    check_certificate_data,
     make_certificate,
     write_certificate,
 )
+from analysis.signing import SigningKey, TrustStore, resolve_trust_store, sign_certificate
 from coral_lang.mission import Mission, load_mission
 from coral_lang.net import Net
 from coral_lang.profile import VehicleProfile
@@ -32,6 +44,7 @@ __all__ = [
     "approve_mission",
     "check_mission_certificate",
     "default_certificate_path",
+    "trust_store",
 ]
 
 
@@ -61,24 +74,47 @@ def default_certificate_path(mission: Path) -> Path:
     return mission.with_name(mission.stem + ".certificate.json")
 
 
+def trust_store(path: str | Path | None = None) -> TrustStore:
+    """The keys a run trusts: those in ``path`` (``--trusted-keys``), else in the
+    default trust store if it exists, else none.
+
+    Raises:
+        analysis.signing.KeyFileError: ``path`` (or the default store) is missing or
+            holds a line that is not a public key.
+    """
+    return resolve_trust_store(path, os.environ)
+
+
 def check_mission_certificate(
-    mission: Mission, certificate: str | Path | None = None
+    mission: Mission,
+    certificate: str | Path | None = None,
+    *,
+    trusted: TrustStore | None = None,
 ) -> CertificateCheck:
-    """Check ``mission``'s certificate against its net and its vehicle profile.
+    """Check ``mission``'s certificate against its net, its vehicle profile and the
+    trusted keys.
 
     ``certificate`` defaults to `default_certificate_path` beside the mission file. The
     profile content is always passed, so a certificate that does not cover the profile
-    as it is now is refused; this is the check every run (and fuzzing) must use.
+    as it is now is refused; and a trust store always is (``trusted``, default
+    `trust_store`), so an unsigned or forged certificate is refused. This is the check
+    every run (and fuzzing) must use.
 
     Raises:
         CertificateError: as `analysis.certificate.check_certificate`, or no
             ``certificate`` given for a mission compiled from text.
+        analysis.signing.KeyFileError: the default trust store cannot be read.
     """
     if certificate is None:
         if mission.path is None:
             raise CertificateError("a mission compiled from text needs a certificate path")
         certificate = default_certificate_path(mission.path)
-    return check_certificate(mission.net, certificate, profile_content=mission.profile_content())
+    return check_certificate(
+        mission.net,
+        certificate,
+        profile_content=mission.profile_content(),
+        trusted=trust_store() if trusted is None else trusted,
+    )
 
 
 def approve_mission(
@@ -87,9 +123,11 @@ def approve_mission(
     *,
     issue: bool = False,
     profiles: Sequence[VehicleProfile] = (),
+    trusted: TrustStore | None = None,
 ) -> ApprovedMission:
-    """Compile ``mission`` with ``profiles`` and check its certificate (verifying first
-    if ``issue``).
+    """Compile ``mission`` with ``profiles`` and check its certificate against
+    ``trusted`` (default `trust_store`), or, if that fails and ``issue``, verify it here
+    and approve it on that verification (see the module docstring).
 
     Raises:
         coral_lang.diagnostics.CompileError: the mission does not compile (for instance
@@ -102,7 +140,8 @@ def approve_mission(
     compiled = load_mission(path, profiles)
     cert_path = Path(certificate) if certificate is not None else default_certificate_path(path)
     try:
-        return ApprovedMission(compiled, check_mission_certificate(compiled, cert_path), False)
+        approval = check_mission_certificate(compiled, cert_path, trusted=trusted)
+        return ApprovedMission(compiled, approval, False)
     except CertificateError:
         if not issue:
             raise
@@ -121,5 +160,16 @@ def approve_mission(
             f"{path}: verification did not pass ({failing}); run 'coral-check verify "
             f"{path}{options}' for the evidence, fix the mission, and run again"
         )
+    # Approved on this verification, in memory: signed by a key that lives only in this
+    # call and checked against a store of that key alone, through the same checks as any
+    # signed certificate. The file written is unsigned: it records, it does not approve.
+    own_key = SigningKey.generate("coral-run --verify (in-process)")
+    approval = check_certificate_data(
+        compiled.net,
+        sign_certificate(certificate_data, own_key),
+        str(cert_path),
+        profile_content=compiled.profile_content(),
+        trusted=TrustStore.of([own_key.public], "this process's own verification"),
+    )
     write_certificate(certificate_data, cert_path)
-    return ApprovedMission(compiled, check_mission_certificate(compiled, cert_path), True)
+    return ApprovedMission(compiled, approval, True)

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from coral_lang.diagnostics import CoralError, ProfileError, did_you_mean
+from coral_lang.safefile import PROFILE_LIMIT, UnreadableFile, read_text_file
 from coral_lang.yamlsource import Plain, YamlDocument, load_yaml
 
 __all__ = [
@@ -266,11 +267,12 @@ def load_link_profile(spec: str | os.PathLike[str]) -> LinkProfile:
             f"'{spec}' is neither a built-in profile{did_you_mean(str(spec), BUILTIN_PROFILES)}"
             f" nor a YAML file; built-in: {known}",
         )
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise LinkProfileError(str(path), "", f"cannot read the link profile: {reason}") from None
+    try:  # a regular file of at most PROFILE_LIMIT bytes: never a FIFO or /dev/zero
+        text = read_text_file(path, PROFILE_LIMIT)
+    except UnreadableFile as exc:
+        raise LinkProfileError(
+            str(path), "", f"cannot read the link profile: {exc.reason}"
+        ) from None
     return parse_link_profile(text, str(path))
 
 

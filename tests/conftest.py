@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import functools
 import gzip
 import hashlib
 import os
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
+import pytest
 from hypothesis import HealthCheck, settings
+
+from analysis.signing import SigningKey, TrustStore, generate_key_files, load_signing_key
 
 REPO = Path(__file__).resolve().parent.parent
 EXAMPLES = REPO / "examples"
@@ -52,3 +57,38 @@ settings.register_profile(
 )
 settings.register_profile("explore", deadline=None, max_examples=1000)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+@dataclass(frozen=True)
+class TestKey:
+    """A signing key pair made for this test session, as a verifier and an operator
+    would hold it: the private key file, the ``.pub`` file, and the store trusting it."""
+
+    __test__ = False  # not a test class, whatever its name
+
+    private: Path
+    public: Path
+    key: SigningKey
+    trusted: TrustStore
+
+
+@functools.cache
+def session_signing_key() -> TestKey:
+    """One key pair per test process (each pytest-xdist worker makes its own), in a
+    temporary folder: tests sign certificates with it and trust it with
+    ``--trusted-keys``, instead of running with the signature check weakened."""
+    folder = Path(tempfile.mkdtemp(prefix="coral-test-key-"))
+    private = folder / "test-signing.key"
+    public = generate_key_files(private, "coral tests")
+    return TestKey(
+        private,
+        Path(public.source),
+        load_signing_key(private),
+        TrustStore.of([public], public.source),
+    )
+
+
+@pytest.fixture(scope="session")
+def signing_key() -> TestKey:
+    """The session's signing key pair (`session_signing_key`)."""
+    return session_signing_key()

@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from analysis.certificate import CertificateCheck, check_certificate, make_certificate
 from analysis.certificate import write_certificate as write_cert
+from analysis.signing import sign_certificate
 from analysis.verify import verify
 from coral_lang.compiler import compile_source
 from coral_lang.mission import profile_content
 from coral_lang.net import Net
 from coral_lang.profile import VehicleProfile, bundled_profile_path, load_bundled_profile
-from tests.conftest import EXAMPLES
+from tests.conftest import EXAMPLES, session_signing_key
 
 POOL_MISSION = EXAMPLES / "pool_mission" / "pool_mission.coral"
 
@@ -25,10 +27,23 @@ def approve(net: Net, directory: Path, profile: VehicleProfile | None = None) ->
     """Verify ``net``, write its certificate into ``directory`` and check it.
 
     The certificate covers ``profile`` (default: the net's bundled vehicle profile, if
-    there is one), as a run's gate requires."""
+    there is one) and is signed with the session's test key, and checked against a
+    store trusting that key, as a run's gate requires (pass ``--trusted-keys
+    session_signing_key().public`` to a ``coral-run`` given this certificate)."""
     path = directory / f"{net.name}.certificate.json"
     if profile is None and net.vehicle and bundled_profile_path(net.vehicle) is not None:
         profile = load_bundled_profile(net.vehicle)
     content = profile_content(net, profile)
-    write_cert(make_certificate(verify(net), profile_content=content), path)
-    return check_certificate(net, path, profile_content=content)
+    test_key = session_signing_key()
+    certificate = make_certificate(verify(net), profile_content=content)
+    write_cert(sign_certificate(certificate, test_key.key), path)
+    return check_certificate(net, path, profile_content=content, trusted=test_key.trusted)
+
+
+def sign_file(path: Path) -> Path:
+    """Sign the certificate at ``path`` in place with the session's test key, as a
+    verifier would sign what ``coral-run --verify`` wrote unsigned; returns the public key
+    file to give ``coral-run --trusted-keys``."""
+    test_key = session_signing_key()
+    write_cert(sign_certificate(json.loads(path.read_text()), test_key.key), path)
+    return test_key.public

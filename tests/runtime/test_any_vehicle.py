@@ -23,6 +23,7 @@ import pytest
 
 from runtime.eventlog import EventLog
 from tests.conftest import EXAMPLES
+from tests.runtime.helpers import sign_file
 
 BIN = Path(sys.executable).parent
 SURVEY = EXAMPLES / "survey_auv" / "survey.coral"
@@ -149,6 +150,8 @@ def test_minnow_verify_certify_run_over_localhost_sockets(
     )
     refused = _coral_run(
         str(SURVEY),
+        "--trusted-keys",
+        str(sign_file(certificate)),
         "--profile",
         str(edited),
         "--certificate",
@@ -204,7 +207,15 @@ def test_kill_9_then_resume_against_the_generic_served_vehicle(tmp_path: Path, k
         assert any(re.match(r"t=\S+ #6 end_line1", line) for line in seen), "".join(seen)
 
         # No --profile now: the log recorded the profile file the run was compiled with.
-        second = _coral_run("--resume", str(out / "controller.sqlite"), *common[2:], timeout=180)
+        trusted = sign_file(certificate)  # the first run wrote it unsigned (--verify)
+        second = _coral_run(
+            "--resume",
+            str(out / "controller.sqlite"),
+            *common[2:],
+            "--trusted-keys",
+            str(trusted),
+            timeout=180,
+        )
         assert second.returncode == 0, second.stdout + second.stderr
         assert "mission ended: final" in second.stdout
     finally:

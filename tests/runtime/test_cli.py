@@ -104,8 +104,14 @@ def test_a_verified_run_completes_logs_and_plots(
         assert sum(1 for _ in log.samples()) > 300
     for png in ("events.png", "telemetry.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # The certificate written is unsigned: without --verify a later run refuses it.
+    assert "unsigned" in capsys.readouterr().out
+    refused = main([str(POOL_MISSION), "--certificate", str(cert), "--out", str(tmp_path / "b")])
+    assert refused == 2 and "is not signed" in capsys.readouterr().err
+    assert not (tmp_path / "b" / "controller.sqlite").exists()
     # A second run into the same folder would mix two missions' logs: refused.
-    assert main([str(POOL_MISSION), "--certificate", str(cert), "--out", str(out), "-q"]) == 2
+    again = [str(POOL_MISSION), "--verify", "--certificate", str(cert), "--out", str(out), "-q"]
+    assert main(again) == 2
     assert "earlier run" in capsys.readouterr().err
     # The timeline subcommand reads the two logs back.
     assert (

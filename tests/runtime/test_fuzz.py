@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from analysis.signing import TrustStore
 from coral_lang.mission import load_mission
 from coral_lang.net import TransitionKind
 from runtime import fuzz as fuzz_module
@@ -33,7 +34,7 @@ from runtime.fuzz import (
     run_seed,
 )
 from runtime.link import BUILTIN_PROFILES
-from tests.conftest import EXAMPLES
+from tests.conftest import EXAMPLES, session_signing_key
 from tests.runtime.helpers import approve
 from tests.runtime.test_properties import MISSIONS, mission
 from tests.runtime.test_racy import HOSTILE_RACE_SEED, RACE_MARKINGS
@@ -151,7 +152,17 @@ def test_a_verified_mission_that_always_ends_well_exits_0(
     tmp_path: Path, pool_certificate: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     code, out, err = cli(
-        [POOL, "--certificate", str(pool_certificate), "--runs", "2", "--out", str(tmp_path)],
+        [
+            POOL,
+            "--certificate",
+            str(pool_certificate),
+            "--trusted-keys",
+            str(session_signing_key().public),
+            "--runs",
+            "2",
+            "--out",
+            str(tmp_path),
+        ],
         capsys,
     )
     assert code == 0, out + err
@@ -239,8 +250,18 @@ def test_the_unverified_approval_is_marked_and_only_ever_simulated() -> None:
 def test_a_verified_mission_keeps_its_certificate(pool_certificate: Path) -> None:
     pool = mission("pool")
     del pool
-    approval, reason = approval_for(load_mission(Path(POOL)), pool_certificate, unverified=True)
+    approval, reason = approval_for(
+        load_mission(Path(POOL)),
+        pool_certificate,
+        unverified=True,
+        trusted=session_signing_key().trusted,
+    )
     assert reason is None and approval.path == str(pool_certificate)
+    # Not trusted: refused as a run refuses it, so only --unverified fuzzes it.
+    refused, reason = approval_for(
+        load_mission(Path(POOL)), pool_certificate, unverified=True, trusted=TrustStore()
+    )
+    assert refused.path == UNVERIFIED and reason is not None and "not trusted" in reason
 
 
 # --------------------------------------------------------------------------- bad input

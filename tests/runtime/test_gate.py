@@ -10,12 +10,13 @@ from pathlib import Path
 import pytest
 
 from analysis.certificate import CertificateError, make_certificate, write_certificate
+from analysis.signing import TrustStore, sign_certificate
 from analysis.verify import VerifyOptions, verify
 from coral_lang import CompileError, load_mission, load_profile
 from coral_lang.net import Command
 from runtime.gate import approve_mission, check_mission_certificate, default_certificate_path
 from runtime.schedule import DEFAULT_WORK_S, Timing
-from tests.conftest import EXAMPLES
+from tests.conftest import EXAMPLES, TestKey
 
 SURVEY = EXAMPLES / "survey_auv" / "survey.coral"
 MINNOW = EXAMPLES / "profiles" / "minnow.yaml"
@@ -30,20 +31,41 @@ def _edited_minnow(tmp_path: Path, old: str, new: str) -> Path:
     return path
 
 
+def _sign_file(path: Path, key: TestKey) -> None:
+    """Sign the certificate at ``path`` in place, as a verifier holding ``key`` would."""
+    write_certificate(sign_certificate(json.loads(path.read_text()), key.key), path)
+
+
+NOBODY = TrustStore()
+
+
 def test_a_mission_for_a_vehicle_given_by_profile_is_certified_and_approved(
-    tmp_path: Path,
+    tmp_path: Path, signing_key: TestKey
 ) -> None:
     cert = tmp_path / "survey.cert.json"
     minnow = load_profile(MINNOW)
-    issued = approve_mission(SURVEY, cert, issue=True, profiles=[minnow])
+    issued = approve_mission(SURVEY, cert, issue=True, profiles=[minnow], trusted=NOBODY)
     assert issued.issued_now and issued.path == SURVEY
     assert issued.mission.profile is minnow and issued.net is issued.mission.net
     assert issued.approval.net_digest == issued.net.digest()
     assert issued.approval.profile_digest == issued.mission.profile_digest()
-    section = json.loads(cert.read_text())["profile"]
+    # Approved on its own verification, by a key that never left the process.
+    assert issued.approval.signer is not None
+    assert issued.approval.signer not in signing_key.trusted.keys
+    written = json.loads(cert.read_text())
+    assert "signature" not in written  # the file records; it does not approve
+    section = written["profile"]
     assert section["vehicle"] == "MINNOW" and section["digest"] == issued.mission.profile_digest()
-    again = approve_mission(SURVEY, cert, profiles=[load_profile(MINNOW)])
+    with pytest.raises(CertificateError, match="is not signed"):
+        approve_mission(SURVEY, cert, profiles=[load_profile(MINNOW)], trusted=NOBODY)
+    _sign_file(cert, signing_key)
+    with pytest.raises(CertificateError, match="not trusted here"):
+        approve_mission(SURVEY, cert, profiles=[load_profile(MINNOW)], trusted=NOBODY)
+    again = approve_mission(
+        SURVEY, cert, profiles=[load_profile(MINNOW)], trusted=signing_key.trusted
+    )
     assert not again.issued_now and again.approval.profile_digest == section["digest"]
+    assert again.approval.signer == signing_key.key.public.key_id
 
 
 def test_without_its_profile_the_mission_does_not_compile(tmp_path: Path) -> None:
@@ -52,13 +74,14 @@ def test_without_its_profile_the_mission_does_not_compile(tmp_path: Path) -> Non
 
 
 def test_a_profile_edited_since_certification_is_refused_and_reissued_on_request(
-    tmp_path: Path,
+    tmp_path: Path, signing_key: TestKey
 ) -> None:
     cert = tmp_path / "survey.cert.json"
     approve_mission(SURVEY, cert, issue=True, profiles=[load_profile(MINNOW)])
+    _sign_file(cert, signing_key)
     slower = load_profile(_edited_minnow(tmp_path, "duration_s: 60.0 ", "duration_s: 90.0 "))
     with pytest.raises(CertificateError) as refused:
-        approve_mission(SURVEY, cert, profiles=[slower])
+        approve_mission(SURVEY, cert, profiles=[slower], trusted=signing_key.trusted)
     message = str(refused.value)
     assert "profile MINNOW changed since certification: DEPTH?.duration_s 60 -> 90;" in message
     assert f"--profile {tmp_path / 'minnow.yaml'}" in message
@@ -67,18 +90,21 @@ def test_a_profile_edited_since_certification_is_refused_and_reissued_on_request
     assert json.loads(cert.read_text())["profile"]["commands"]["DEPTH?"]["duration_s"] == 90.0
 
 
-def test_a_certificate_from_before_profile_coverage_does_not_run(tmp_path: Path) -> None:
+def test_a_certificate_from_before_profile_coverage_does_not_run(
+    tmp_path: Path, signing_key: TestKey
+) -> None:
     mission = load_mission(POOL)
     cert = tmp_path / "pool.cert.json"
     write_certificate(make_certificate(verify(mission.net, VerifyOptions(structural=False))), cert)
+    _sign_file(cert, signing_key)
     with pytest.raises(CertificateError, match="predates profile coverage"):
-        approve_mission(POOL, cert)
+        approve_mission(POOL, cert, trusted=signing_key.trusted)
     with pytest.raises(CertificateError, match="predates profile coverage"):
-        check_mission_certificate(mission, cert)
+        check_mission_certificate(mission, cert, trusted=signing_key.trusted)
 
 
 def test_check_mission_certificate_defaults_to_the_file_beside_the_mission(
-    tmp_path: Path,
+    tmp_path: Path, signing_key: TestKey, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     mission_file = tmp_path / "dive.coral"
     mission_file.write_text(
@@ -88,8 +114,15 @@ def test_check_mission_certificate_defaults_to_the_file_beside_the_mission(
     )
     approved = approve_mission(mission_file, issue=True)
     assert approved.approval.path == str(default_certificate_path(mission_file))
+    _sign_file(default_certificate_path(mission_file), signing_key)
+    # No store given: the default one, here a folder of .pub files under XDG_CONFIG_HOME.
+    store = tmp_path / "config" / "coral" / "trusted_keys"
+    store.mkdir(parents=True)
+    (store / "verifier.pub").write_text(signing_key.public.read_text())
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
     accepted = check_mission_certificate(approved.mission)
     assert accepted.profile_digest == approved.mission.profile_digest()
+    assert accepted.signer == signing_key.key.public.key_id
 
 
 # -- the schedule's work times ------------------------------------------------------------

@@ -19,7 +19,7 @@ import pytest
 
 from runtime.eventlog import EventLog
 from tests.conftest import REPO
-from tests.runtime.helpers import POOL_MISSION
+from tests.runtime.helpers import POOL_MISSION, sign_file
 
 BIN = Path(sys.executable).parent
 
@@ -90,8 +90,18 @@ def test_kill_9_then_resume_loses_and_repeats_nothing(tmp_path: Path) -> None:
         first.wait()
         assert any(re.match(r"t=\S+ #13 reach_wp", line) for line in seen), "".join(seen)
 
+        # The first run trusted its own verification and wrote the certificate unsigned;
+        # resuming takes a signed one, as at sea.
+        trusted = sign_file(certificate)
         second = subprocess.run(
-            [str(BIN / "coral-run"), "--resume", str(out / "controller.sqlite"), *common],
+            [
+                str(BIN / "coral-run"),
+                "--resume",
+                str(out / "controller.sqlite"),
+                *common,
+                "--trusted-keys",
+                str(trusted),
+            ],
             capture_output=True,
             text=True,
             timeout=300,

@@ -337,6 +337,7 @@ def spinning(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
         *,
         issue: bool = False,
         profiles: Sequence[VehicleProfile] = (),
+        trusted: object = None,
     ) -> gate.ApprovedMission:
         loaded = load_mission(Path(mission), profiles)
         return gate.ApprovedMission(loaded, hand_approval(loaded.net), False)
