@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from coral_lang.diagnostics import CoralError
+from runtime.keys import TRUSTED_KEYS_HELP
 from runtime.vehicle.options import add_simulation_arguments, fault_plan_from_args
 
 EXIT_OK = 0
@@ -125,9 +126,7 @@ def build_run_parser() -> argparse.ArgumentParser:
         "--trusted-keys",
         type=Path,
         metavar="PATH",
-        help="public keys whose signed certificates are accepted: a file of "
-        "'coral-ed25519 ...' lines or a folder of .pub files (default "
-        "~/.config/coral/trusted_keys if it exists)",
+        help=TRUSTED_KEYS_HELP,
     )
     parser.add_argument("--key-file", type=Path, metavar="FILE", help="pre-shared key, hex")
     parser.add_argument("--key-hex", metavar="HEX", help="pre-shared key (prefer --key-file)")

@@ -51,6 +51,7 @@ from coral_lang.net import Net, TransitionKind, format_tokens
 from runtime.controller import Controller, ControllerOptions, RunEnd, RunResult
 from runtime.engine import Engine, Policy
 from runtime.eventlog import Event, EventLog
+from runtime.keys import TRUSTED_KEYS_HELP
 from runtime.link import LinkEmulator, LinkProfile, MemoryLink, load_link_profile
 from runtime.vclock import run_virtual
 from runtime.vehicle.model import VehicleModel
@@ -898,9 +899,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--trusted-keys",
         type=Path,
         metavar="PATH",
-        help="public keys whose signed certificates are accepted: a file of "
-        "'coral-ed25519 ...' lines or a folder of .pub files (default "
-        "~/.config/coral/trusted_keys if it exists)",
+        help=TRUSTED_KEYS_HELP,
     )
     parser.add_argument(
         "--unverified",

@@ -11,12 +11,19 @@ from pathlib import Path
 from coral_lang.diagnostics import CoralError
 from runtime.protocol import MIN_KEY_SIZE
 
-__all__ = ["KEY_HINT", "KeyProblem", "load_psk"]
+__all__ = ["KEY_HINT", "TRUSTED_KEYS_HELP", "KeyProblem", "load_psk"]
 
 KEY_HINT = (
     f"give --key-file FILE or --key-hex HEX with at least {MIN_KEY_SIZE} bytes "
     "(32 random bytes recommended: python -c 'import secrets; print(secrets.token_hex(32))')"
 )
+
+
+TRUSTED_KEYS_HELP = (
+    "public keys whose signed certificates are accepted: a file of 'coral-ed25519 ...' "
+    "lines or a folder of .pub files (default ~/.config/coral/trusted_keys if it exists)"
+)
+"""The help of ``--trusted-keys``, the same on ``coral-run`` and ``coral-run fuzz``."""
 
 
 class KeyProblem(CoralError, ValueError):
