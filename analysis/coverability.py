@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,7 +42,13 @@ OMEGA = -1
 """ω in an internal tree marking: more tokens than any bound. Never in a public result."""
 
 _BIG = np.iinfo(np.int64).max // 4
-"""ω in the numpy view of markings: larger than any token count a net can reach here."""
+"""ω in the numpy view of markings: larger than any token count the tree holds (a
+count reaching it stops the tree, see `MAX_EXACT_TOKENS`)."""
+
+MAX_EXACT_TOKENS = int(_BIG) - 1
+"""Largest token count the tree represents exactly (2**61 - 2). A larger count would
+be mistaken for ω (a bounded place reported unbounded) or overflow int64 (a traceback):
+the tree stops there and leaves boundedness undecided, saying why."""
 
 DEFAULT_MAX_NODES = 100_000
 DEFAULT_TIME_LIMIT = 30.0
@@ -146,10 +152,15 @@ class _Tree:
         self.net = net
         self.inputs = [[(net.place_index(p), w) for p, w in t.inputs] for t in net.transitions]
         self.outputs = [[(net.place_index(p), w) for p, w in t.outputs] for t in net.transitions]
-        self.nodes = [_Node(net.initial_marking(), -1, -1)]
-        self.rows = [_numeric([net.initial_marking()])[0]]  # node markings, ω as _BIG
+        start = net.initial_marking()
+        self.nodes = [_Node(start, -1, -1)]
+        # node markings, ω as _BIG; none when M0 itself is too large (build stops at once)
+        self.rows = [_numeric([start])[0]] if max(start, default=0) <= MAX_EXACT_TOKENS else []
 
     def build(self, max_nodes: int, deadline: float | None, clock: Clock) -> tuple[bool, str]:
+        too_many = self._too_many(self.nodes[0].marking, range(len(self.nodes[0].marking)))
+        if too_many:
+            return False, too_many
         seen = {self.nodes[0].marking}
         queue = deque([0])
         while queue:
@@ -167,7 +178,11 @@ class _Tree:
                 if chain is None:  # shared by all children of this node
                     chain = self.path(index)
                     ancestors = np.stack([self.rows[i] for i in chain])
-                child = self._accelerate(index, t, self._fire(marking, t), chain, ancestors)
+                fired = self._fire(marking, t)
+                too_many = self._too_many(fired, (p for p, _ in self.outputs[t]))
+                if too_many:  # only outputs grow a count: the other places were checked
+                    return False, too_many
+                child = self._accelerate(index, t, fired, chain, ancestors)
                 if child.marking in seen:
                     continue
                 seen.add(child.marking)
@@ -175,6 +190,17 @@ class _Tree:
                 self.rows.append(_numeric([child.marking])[0])
                 queue.append(len(self.nodes) - 1)
         return True, ""
+
+    def _too_many(self, values: Sequence[int], places: Iterable[int]) -> str:
+        """Why the tree must stop if a finite count among ``places`` of ``values`` is
+        past `MAX_EXACT_TOKENS` (the numpy view cannot hold it apart from ω); else ""."""
+        for p in places:
+            if values[p] > MAX_EXACT_TOKENS:
+                return (
+                    f"'{self.net.places[p].name}' reaches {values[p]} tokens, more than the "
+                    f"{MAX_EXACT_TOKENS} the tree represents exactly"
+                )
+        return ""
 
     def _fire(self, marking: Marking, t: int) -> list[int]:
         values = list(marking)
@@ -393,6 +419,8 @@ def _pair_in_run(net: Net, place: int, run: list[int]) -> PumpingTrace | None:
         if not net.enabled(marking, tr):
             break
         marking = net.fire(marking, tr)
+        if max(marking, default=0) > MAX_EXACT_TOKENS:
+            break  # past int64's reach: compare only the markings before it
         seen.append(marking)
     rows = np.array(seen, dtype=np.int64)
     for j in range(1, len(rows)):
@@ -432,6 +460,7 @@ def _search(net: Net, place: int) -> PumpingTrace | None:
 __all__ = [
     "DEFAULT_MAX_NODES",
     "DEFAULT_TIME_LIMIT",
+    "MAX_EXACT_TOKENS",
     "CoverabilityResult",
     "PumpingTrace",
     "coverability",

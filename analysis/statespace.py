@@ -855,8 +855,8 @@ class _Explorer:
             p = max(needed, key=lambda q: needed[q])
             name = self.cn.net.places[p].name
             self.stopped = (
-                f"token count of place '{name}' reached {needed[p]} (over 2**{MAX_FIELD_BITS});"
-                " the net is unbounded"
+                f"token count of place '{name}' would pass 2**{MAX_FIELD_BITS}, past what the"
+                " explorer counts exactly (the net may be unbounded)"
             )
             raise _Stop
         packed = self.layout.repack(self.store.keys, layout)
@@ -1060,6 +1060,10 @@ class _Explorer:
     def run(self) -> None:
         self.store.add(self.layout.pack(self.cn.initial[None, :]))
         self.offer(self.fnet.initial[:, None], 0)
+        too_large = _beyond_exact_arithmetic(self.cn.net)
+        if too_large is not None:
+            self.stopped = too_large
+            raise _Stop
         # A layer is a list of column blocks (as produced, never joined into one array:
         # the widest layers are the largest temporaries) with their sleep sets.
         layer: list[npt.NDArray[np.integer]] = [self.fnet.initial[:, None].astype(self.dtype)]
@@ -1301,6 +1305,31 @@ def _masked(cn: CompactNet, select: npt.NDArray[np.bool_], sign: int) -> Arcs:
     """The effect arcs ``select``-ed, times ``sign`` (the others zero)."""
     effects = cn.effects
     return Arcs(effects.indptr, effects.places, np.where(select, sign * effects.values, 0))
+
+
+def _beyond_exact_arithmetic(net: Net) -> str | None:
+    """Why ``net``'s numbers are too large to explore exactly, or None.
+
+    Counts are kept below ``2**MAX_FIELD_BITS``; with every initial count and arc weight
+    at most that too, a firing's sum stays below ``2**61`` and 64-bit arithmetic never
+    wraps. A larger weight could wrap silently (the red team's net gaining ``2**62``
+    tokens a firing was reported bounded), so such a net is not explored at all.
+    """
+    limit = 2**MAX_FIELD_BITS
+    for place in net.places:
+        if place.initial > limit:
+            return (
+                f"place '{place.name}' starts with {place.initial} tokens, over 2**"
+                f"{MAX_FIELD_BITS}: too large to count exactly"
+            )
+    for transition in net.transitions:
+        for place_name, weight in (*transition.inputs, *transition.outputs):
+            if weight > limit:
+                return (
+                    f"transition '{transition.name}' moves {weight} tokens of '{place_name}', "
+                    f"over 2**{MAX_FIELD_BITS}: too large to count exactly"
+                )
+    return None
 
 
 def explore(

@@ -740,19 +740,30 @@ class _Checker:
             elif assertion.kind is AssertKind.BOUND:
                 bound = assertion.bound or 0
                 cols = [i for i, _ in columns]
+                # ``assert bound {p*2, q} <= k`` bounds the weighted sum 2*M(p) + M(q):
+                # a weight is part of what the mission says, never dropped.
+                weights = np.array([w for _, w in columns], dtype=np.int64)
 
                 def above(
-                    block: Markings, cols: list[int] = cols, k: int = bound
+                    block: Markings,
+                    cols: list[int] = cols,
+                    weights: npt.NDArray[np.int64] = weights,
+                    k: int = bound,
                 ) -> npt.NDArray[np.bool_]:
-                    over: npt.NDArray[np.bool_] = block[:, cols].sum(axis=1) > k
-                    return over
+                    if (weights == 1).all():  # the common case, kept vectorised
+                        over: npt.NDArray[np.bool_] = block[:, cols].sum(axis=1) > k
+                        return over
+                    # object dtype: exact Python ints, so a large count times a large
+                    # weight cannot wrap around int64 and hide a violation.
+                    total = block[:, cols].astype(object) @ weights.astype(object)
+                    return np.asarray(total > k, dtype=bool)
 
                 results.append(
                     self._search_then_prove(
                         key,
                         title,
                         above,
-                        partial(_above, tuple(p for p, _ in assertion.places), bound),
+                        partial(_above, assertion.places, bound),
                         assertion.span,
                     )
                 )
@@ -879,8 +890,16 @@ def _covering(places: tuple[tuple[str, int], ...], label: str) -> stateeq.BadMar
     return stateeq.BadMarkings(constraints=constraints, label=label)
 
 
-def _above(places: tuple[str, ...], bound: int) -> stateeq.BadMarkings:
-    """Markings with more than ``bound`` tokens in ``places`` together."""
+def _above(places: tuple[tuple[str, int], ...], bound: int) -> stateeq.BadMarkings:
+    """Markings whose weighted token sum over ``places`` exceeds ``bound``
+    (``assert bound {p*2, q} <= k``: 2*M(p) + M(q) > k); unweighted places count once."""
     from analysis import stateeq
 
-    return stateeq.above_bound(list(places), bound)
+    if all(w == 1 for _, w in places):
+        return stateeq.above_bound([p for p, _ in places], bound)
+    terms = tuple(places)
+    shown = " + ".join(p if w == 1 else f"{w}*{p}" for p, w in terms)
+    return stateeq.BadMarkings(
+        constraints=(stateeq.PlaceConstraint(terms, ">=", bound + 1),),
+        label=f"{shown} above {bound}",
+    )

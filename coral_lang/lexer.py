@@ -170,7 +170,23 @@ def tokenize(text: str, file: str) -> tuple[list[Token], list[Diagnostic]]:
             elif number:
                 offset = col - 1 + len(number)
                 kind = Kind.INT if number.isdigit() else Kind.FLOAT
-                if len(number) > MAX_NUMBER_DIGITS:
+                if not number.isascii():
+                    # \d matches every Unicode digit (U+0663, U+FF13) and int()/float()
+                    # read them as 0-9: a mission would say 3 where its reader sees
+                    # another script. Numbers are ASCII digits only.
+                    span = Span(file, line, col, line, offset + 1)
+                    odd = next(c for c in number if not c.isascii())
+                    diagnostics.append(
+                        Diagnostic(
+                            Severity.ERROR,
+                            "CORAL001",
+                            f"number {number!r} uses the non-ASCII digit {odd!r}"
+                            f" (U+{ord(odd):04X}); write numbers with the digits 0-9",
+                            span,
+                        )
+                    )
+                    kind = Kind.ERROR  # the parser stays quiet on it: reported here
+                elif len(number) > MAX_NUMBER_DIGITS:
                     span = Span(file, line, col, line, offset + 1)
                     diagnostics.append(
                         Diagnostic(

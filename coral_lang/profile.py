@@ -215,6 +215,8 @@ def parse_profile(text: str, file: str = "<profile>") -> VehicleProfile:
         raise doc.error(
             "vehicle", f"vehicle name '{name}' must be an identifier (letters, digits, _)"
         )
+    if "version" in root:
+        _version(doc, root["version"])
     resources = tuple(_string_list(doc, root.get("resources", []), "resources"))
     commands_node = _mapping(doc, root["commands"], "commands")
     if not commands_node:
@@ -422,6 +424,17 @@ def _number(doc: YamlDocument, node: Plain, path: str) -> float:
     if not math.isfinite(node):
         raise doc.error(path, "expected a finite number")
     return float(node)
+
+
+def _version(doc: YamlDocument, node: Plain) -> int:
+    """The profile format ``version``: a positive whole number. Checked although
+    nothing reads it yet, so that ``version: "1.2"`` or ``version: -1`` is refused
+    now rather than silently accepted and later misread."""
+    if isinstance(node, bool) or not isinstance(node, int):
+        raise doc.error("version", f"expected a positive whole number, got {_kind(node)}")
+    if node < 1:
+        raise doc.error("version", f"expected a positive whole number, got {node}")
+    return node
 
 
 def _kind(node: Plain) -> str:

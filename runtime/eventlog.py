@@ -617,12 +617,28 @@ class EventLog:
     # --- reading ----------------------------------------------------------------------------
 
     def checkpoint(self) -> dict[str, object] | None:
-        """The latest committed state, or None if no commit carried one."""
+        """The latest committed state, or None if no commit carried one.
+
+        Raises:
+            EventLogError: the stored state is not a JSON object. `commit` only ever
+                writes one, so the log was damaged or edited: resuming must stop with a
+                message naming the log, not a JSON traceback or a silent fresh start.
+        """
         row = self._query_one("SELECT state FROM checkpoint WHERE id = 1")
         if row is None:
             return None
-        loaded = json.loads(str(row[0]))
-        return dict(loaded) if isinstance(loaded, dict) else None
+        try:
+            loaded = json.loads(str(row[0]))
+        except (ValueError, RecursionError) as error:
+            raise EventLogError(
+                f"{self.path}: the checkpoint is not valid JSON ({error}); "
+                "the log was damaged or edited"
+            ) from None
+        if not isinstance(loaded, dict):
+            raise EventLogError(
+                f"{self.path}: the checkpoint is not a JSON object; the log was damaged or edited"
+            )
+        return dict(loaded)
 
     def checkpoint_seq(self) -> int:
         """The seq of the last event committed together with the latest checkpoint (0: none).

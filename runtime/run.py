@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 
 from runtime.controller import Controller, ControllerOptions, RunResult
 from runtime.engine import Engine, Policy
-from runtime.eventlog import EventLog
+from runtime.eventlog import EventLog, EventLogError
 from runtime.faultplan import FaultPlan
 from runtime.gate import ApprovedMission
 from runtime.link import Link, LinkEmulator, LinkProfile, MemoryLink, SocketLink
@@ -169,18 +169,20 @@ def resume_mission(mission: ApprovedMission, log_path: Path, config: RunConfig) 
     """Continue the mission logged in ``log_path`` after the controller died.
 
     Raises:
-        runtime.eventlog.EventLogError: the log cannot be opened for writing.
+        runtime.eventlog.EventLogError: the log cannot be opened for writing, is the log
+            of another net, or holds no usable committed state (each a `CoralError`, so
+            ``coral-run`` reports it as bad input, naming the log).
         runtime.engine.EngineError: the log's state does not belong to this net.
-        ValueError: the log holds no committed state.
     """
     model = _simulated_vehicle(mission, config)
     log = EventLog.open(log_path, writable=True)
     try:
         if log.net_digest is not None and log.net_digest != mission.net.digest():
-            raise ValueError(
-                f"{log_path} is the log of net {log.net_digest}, but {mission.path} now "
+            raise EventLogError(
+                f"{log_path} is the log of net {log.net_digest}, but {mission.path} "
                 f"compiles to {mission.net.digest()}: resume with the mission that was running"
             )
+        _check_resumable(log, log_path)
         rng = random.Random(config.seed ^ 0x5EED)
 
         def make(link: Link, now: float, nonces: Callable[[int], bytes]) -> Controller:
@@ -206,6 +208,32 @@ def resume_mission(mission: ApprovedMission, log_path: Path, config: RunConfig) 
         return _drive(config, make, rng, mission.net.name, model)
     finally:
         log.close()
+
+
+def _check_resumable(log: EventLog, log_path: Path) -> None:
+    """Refuse a log whose committed state cannot be resumed, before anything starts.
+
+    `Controller.resume` checks the same and raises ValueError; checking here first
+    keeps a bad log from getting a ``resume`` event or a vehicle connection, and makes
+    the refusal an `EventLogError` that names the log (``coral-run`` exit 2).
+    """
+    state = log.checkpoint()  # EventLogError if it is not a JSON object
+    if state is None:
+        raise EventLogError(
+            f"{log_path}: no committed state to resume from (the run stopped before its "
+            "first checkpoint, or the checkpoint row was removed); start the mission anew"
+        )
+    if not isinstance(state.get("engine"), dict):
+        raise EventLogError(
+            f"{log_path}: the committed state has no engine state; the log was damaged or edited"
+        )
+    for field_name in ("mission_id", "consumed"):
+        value = state.get(field_name)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise EventLogError(
+                f"{log_path}: the committed state's {field_name!r} is not a whole number; "
+                "the log was damaged or edited"
+            )
 
 
 def check_verified_state(net: Net, marking: Sequence[int]) -> None:

@@ -217,6 +217,7 @@ def test_public_surface_of_the_structural_modules() -> None:
         "analysis.coverability": {
             "DEFAULT_MAX_NODES",
             "DEFAULT_TIME_LIMIT",
+            "MAX_EXACT_TOKENS",
             "CoverabilityResult",
             "PumpingTrace",
             "coverability",
