@@ -30,6 +30,11 @@ Clock = Callable[[], float]
 
 DEFAULT_MAX_ROWS = 20_000
 DEFAULT_TIME_LIMIT = 20.0
+DEFAULT_MAX_CELLS = 20_000_000
+"""Size budget: the elimination's working rows are dense (one weight per variable, one
+residual per column), so it needs variables x (variables + columns) cells from the
+start. A net above this is not attempted: the basis is empty and incomplete, with the
+reason "too large for the structural method (N places)"."""
 
 # A working row: (weights over the variables, residual over the columns, support bitmask).
 _Row = tuple[list[int], list[int], int]
@@ -238,6 +243,7 @@ def p_invariants(
     max_rows: int = DEFAULT_MAX_ROWS,
     time_limit: float | None = DEFAULT_TIME_LIMIT,
     clock: Clock = time.monotonic,
+    max_cells: int = DEFAULT_MAX_CELLS,
 ) -> InvariantBasis:
     """Minimal-support P-invariants of ``net`` (y >= 0, y^T C = 0).
 
@@ -246,10 +252,14 @@ def p_invariants(
         max_rows: Work bound, see `semiflows`.
         time_limit: Seconds, see `semiflows`.
         clock: Monotonic clock for the time limit.
+        max_cells: Size budget, see `DEFAULT_MAX_CELLS`.
 
     Returns:
         An `InvariantBasis` of kind ``"P"``.
     """
+    n_p, n_t = len(net.places), len(net.transitions)
+    if n_p * (n_p + n_t) > max_cells:
+        return _basis("P", net.place_names, [], False, _too_large(n_p, "places"))
     vectors, complete, reason = semiflows(incidence(net).rows(), max_rows, time_limit, clock)
     return _basis("P", net.place_names, vectors, complete, reason)
 
@@ -259,6 +269,7 @@ def t_invariants(
     max_rows: int = DEFAULT_MAX_ROWS,
     time_limit: float | None = DEFAULT_TIME_LIMIT,
     clock: Clock = time.monotonic,
+    max_cells: int = DEFAULT_MAX_CELLS,
 ) -> InvariantBasis:
     """Minimal-support T-invariants of ``net`` (x >= 0, C x = 0).
 
@@ -267,14 +278,22 @@ def t_invariants(
         max_rows: Work bound, see `semiflows`.
         time_limit: Seconds, see `semiflows`.
         clock: Monotonic clock for the time limit.
+        max_cells: Size budget, see `DEFAULT_MAX_CELLS`.
 
     Returns:
         An `InvariantBasis` of kind ``"T"``.
     """
-    matrix = incidence(net).rows()
-    columns = [[row[t] for row in matrix] for t in range(len(net.transitions))]
+    names = tuple(t.name for t in net.transitions)
+    n_p, n_t = len(net.places), len(net.transitions)
+    if n_t * (n_t + n_p) > max_cells:
+        return _basis("T", names, [], False, _too_large(n_t, "transitions"))
+    columns = [[int(v) for v in column] for column in incidence(net).matrix.T]
     vectors, complete, reason = semiflows(columns, max_rows, time_limit, clock)
-    return _basis("T", tuple(t.name for t in net.transitions), vectors, complete, reason)
+    return _basis("T", names, vectors, complete, reason)
+
+
+def _too_large(size: int, what: str) -> str:
+    return f"too large for the structural method ({size} {what})"
 
 
 def _basis(
@@ -365,6 +384,7 @@ def invariant_report(
     max_rows: int = DEFAULT_MAX_ROWS,
     time_limit: float | None = DEFAULT_TIME_LIMIT,
     clock: Clock = time.monotonic,
+    max_cells: int = DEFAULT_MAX_CELLS,
 ) -> InvariantReport:
     """Compute P- and T-invariants and what they prove (coverage, bounds, classes).
 
@@ -373,12 +393,13 @@ def invariant_report(
         max_rows: Work bound for each elimination.
         time_limit: Seconds for each elimination.
         clock: Monotonic clock for the time limits.
+        max_cells: Size budget for each elimination, see `DEFAULT_MAX_CELLS`.
 
     Returns:
         The `InvariantReport`.
     """
-    p = p_invariants(net, max_rows, time_limit, clock)
-    t = t_invariants(net, max_rows, time_limit, clock)
+    p = p_invariants(net, max_rows, time_limit, clock, max_cells)
+    t = t_invariants(net, max_rows, time_limit, clock, max_cells)
     return InvariantReport(
         p=p,
         t=t,

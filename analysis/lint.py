@@ -78,11 +78,15 @@ class LintOptions:
         max_states: State budget for finding racing transitions (CORAL207); races
             beyond it are not reported.
         time_limit: Seconds for that search.
+        max_pairs_per_place: Candidate pairs examined per shared input place (CORAL207);
+            a place with more consumers than that allows gets a note saying how many
+            pairs were skipped.
     """
 
     link_rtt_s: float = DEFAULT_LINK_RTT_S
     max_states: int = 200_000
     time_limit: float = 10.0
+    max_pairs_per_place: int = 1_000
 
 
 def lint(
@@ -197,11 +201,13 @@ def _unused_constants(result: CompileResult) -> Iterator[Diagnostic]:
 
 
 def _place_usage(net: Net) -> Iterator[Diagnostic]:
-    consumed: set[str] = set()
+    consumers: dict[str, list[str]] = {}  # place -> transitions that wait on it
     produced: set[str] = set()
     for tr in net.transitions:
-        consumed.update(p for p, _ in tr.inputs)
+        for p, _ in tr.inputs:
+            consumers.setdefault(p, []).append(tr.name)
         produced.update(p for p, _ in tr.outputs)
+    consumed = consumers.keys()
     in_finals = {p for f in net.finals for p, _ in f.tokens}
     in_asserts = {p for a in net.assertions for p, _ in a.places}
     in_asserts.update(p for a in net.assertions if a.formula for p in places_of(a.formula))
@@ -221,7 +227,7 @@ def _place_usage(net: Net) -> Iterator[Diagnostic]:
                 )
             continue
         if name in consumed and not marked:
-            waiting = sorted({t.name for t in net.transitions if name in dict(t.inputs)})
+            waiting = sorted(set(consumers[name]))
             yield _finding(
                 "CORAL204",
                 f"place '{name}' is waited on ({', '.join(waiting)}) but nothing ever marks "
@@ -270,16 +276,22 @@ def _unprioritised_conflicts(
     """Pairs of engine transitions (not vehicle replies) with equal priority that are both
     enabled in some reachable marking while their shared input places cannot feed both:
     the engine's choice between them then rests on source order alone."""
-    engine = [i for i, t in enumerate(net.transitions) if t.kind is not TransitionKind.REPLY]
+    candidates, skipped = _conflict_candidates(net, options.max_pairs_per_place)
+    for place, (consumers, count) in skipped.items():
+        yield Diagnostic(
+            Severity.NOTE,
+            "CORAL207",
+            f"place '{place}' is waited on by {consumers} transitions: only the first "
+            f"{options.max_pairs_per_place} pairs of equal priority were checked for races "
+            f"(skipped: {count} pairs)",
+            net.places[net.place_index(place)].span,
+            ("give the transitions priorities, or split the place",),
+        )
     pairs = []
-    for a_pos, a in enumerate(engine):
-        ta = net.transitions[a]
-        inputs_a = dict(ta.inputs)
-        for b in engine[a_pos + 1 :]:
-            tb = net.transitions[b]
-            shared = [(p, w, inputs_a[p]) for p, w in tb.inputs if p in inputs_a]
-            if shared and ta.priority == tb.priority:
-                pairs.append((a, b, shared))
+    for a, b in sorted(candidates):
+        inputs_a = dict(net.transitions[a].inputs)
+        shared = [(p, w, inputs_a[p]) for p, w in net.transitions[b].inputs if p in inputs_a]
+        pairs.append((a, b, shared))
     if not pairs:
         return
     space = given
@@ -315,6 +327,45 @@ def _unprioritised_conflicts(
             f"give one a priority ('transition {tb.name} priority 1'), or allow it here "
             "with a reason if either order is intended",
         )
+
+
+def _conflict_candidates(
+    net: Net, per_place: int
+) -> tuple[set[tuple[int, int]], dict[str, tuple[int, int]]]:
+    """Pairs (a, b), a < b, of engine transitions with equal priority that share an input
+    place, found from each place's consumers (never all pairs of transitions); and, per
+    place with more such pairs than ``per_place``, (its consumers, pairs skipped)."""
+    by_place: dict[str, list[int]] = {}
+    for i, t in enumerate(net.transitions):
+        if t.kind is not TransitionKind.REPLY:
+            for p, _ in t.inputs:
+                by_place.setdefault(p, []).append(i)
+    pairs: set[tuple[int, int]] = set()
+    skipped: dict[str, tuple[int, int]] = {}
+    for place, consumers in by_place.items():
+        if len(consumers) < 2:
+            continue
+        groups: dict[int, list[int]] = {}
+        for i in consumers:
+            groups.setdefault(net.transitions[i].priority, []).append(i)
+        budget, left_out = per_place, 0
+        for group in groups.values():
+            for x, a in enumerate(group):
+                if budget <= 0:
+                    left_out += len(group) - 1 - x
+                    continue
+                for b in group[x + 1 :]:
+                    pair = (a, b) if a < b else (b, a)
+                    if pair in pairs:
+                        continue
+                    if budget <= 0:
+                        left_out += 1
+                        continue
+                    pairs.add(pair)
+                    budget -= 1
+        if left_out:
+            skipped[place] = (len(consumers), left_out)
+    return pairs, skipped
 
 
 # -- suppressions ------------------------------------------------------------------------

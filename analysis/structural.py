@@ -147,33 +147,63 @@ def classify(net: Net) -> NetClass:
     Returns:
         The `NetClass` flags.
     """
-    inc = incidence(net)
-    pre, post = inc.pre, inc.post
-    ordinary = bool(np.all((pre <= 1) & (post <= 1)))
-    inputs = [frozenset(np.flatnonzero(pre[:, t]).tolist()) for t in range(pre.shape[1])]
-    consumers = [frozenset(np.flatnonzero(pre[p, :]).tolist()) for p in range(pre.shape[0])]
-    in_count = (pre > 0).sum(axis=0)
-    out_count = (post > 0).sum(axis=0)
-    state_machine = ordinary and bool(np.all((in_count == 1) & (out_count == 1)))
-    place_in = (post > 0).sum(axis=1)
-    place_out = (pre > 0).sum(axis=1)
-    marked_graph = ordinary and bool(np.all((place_in == 1) & (place_out == 1)))
+    # From the arcs, never from |P| x |T| matrices: a net of 10^5 places has 10^10 cells.
+    pre = [_weights(t.inputs) for t in net.transitions]
+    post = [_weights(t.outputs) for t in net.transitions]
+    ordinary = all(w <= 1 for arcs in (*pre, *post) for w in arcs.values())
+    consumers: dict[str, list[int]] = {p: [] for p in net.place_names}
+    place_in = dict.fromkeys(net.place_names, 0)
+    for t, (ins, outs) in enumerate(zip(pre, post, strict=True)):
+        for p in ins:
+            consumers[p].append(t)
+        for p in outs:
+            place_in[p] += 1
+    inputs = [ins.keys() for ins in pre]
+    state_machine = ordinary and all(
+        len(ins) == 1 and len(outs) == 1 for ins, outs in zip(pre, post, strict=True)
+    )
+    marked_graph = ordinary and all(
+        place_in[p] == 1 and len(ts) == 1 for p, ts in consumers.items()
+    )
     free_choice = ordinary and all(
-        len(ts) <= 1 or all(inputs[t] == {p} for t in ts) for p, ts in enumerate(consumers)
+        len(ts) <= 1 or all(inputs[t] == {p} for t in ts) for p, ts in consumers.items()
     )
     extended = ordinary and all(
-        all(inputs[t] == inputs[u] for t in ts for u in ts) for ts in consumers
+        all(inputs[t] == inputs[ts[0]] for t in ts) for ts in consumers.values()
     )
-    column_sums = inc.matrix.sum(axis=0)
+    column_sums = [
+        sum(outs.values()) - sum(ins.values()) for ins, outs in zip(pre, post, strict=True)
+    ]
     return NetClass(
         ordinary=ordinary,
         state_machine=state_machine,
         marked_graph=marked_graph,
         free_choice=free_choice,
         extended_free_choice=extended,
-        conservative=bool(np.all(column_sums == 0)),
-        subconservative=bool(np.all(column_sums <= 0)),
+        conservative=all(c == 0 for c in column_sums),
+        subconservative=all(c <= 0 for c in column_sums),
     )
+
+
+def _weights(arcs: tuple[tuple[str, int], ...]) -> dict[str, int]:
+    """Place -> total arc weight (parallel arcs add up, as in `incidence`)."""
+    total: dict[str, int] = {}
+    for place, w in arcs:
+        total[place] = total.get(place, 0) + w
+    return total
+
+
+def _effects(net: Net) -> list[dict[int, int]]:
+    """Column ``t`` of the incidence matrix as place index -> non-zero change."""
+    columns = []
+    for tr in net.transitions:
+        change: dict[int, int] = {}
+        for name, w in tr.outputs:
+            change[net.place_index(name)] = change.get(net.place_index(name), 0) + w
+        for name, w in tr.inputs:
+            change[net.place_index(name)] = change.get(net.place_index(name), 0) - w
+        columns.append({p: c for p, c in change.items() if c})
+    return columns
 
 
 # -- structural boundedness ---------------------------------------------------------------
@@ -257,18 +287,16 @@ def structural_boundedness(
     """
     import z3
 
-    rows = incidence(net).rows()
+    effects = _effects(net)
     names = net.place_names
     m0 = net.initial_marking()
-    n_t = len(net.transitions)
     y = [z3.Real(f"y_{i}") for i in range(len(names))]
     reasons: list[str] = []
 
     def column_constraints() -> list[z3.BoolRef]:
         return [
-            z3.Sum([rows[p][t] * y[p] for p in range(len(names)) if rows[p][t]] or [z3.RealVal(0)])
-            <= 0
-            for t in range(n_t)
+            z3.Sum([c * y[p] for p, c in sorted(column.items())] or [z3.RealVal(0)]) <= 0
+            for column in effects
         ]
 
     solver = z3.Solver()

@@ -500,35 +500,22 @@ class _Reader:
         return self.read_count(inscription, f"weight of <arc> '{ident}'", 1)
 
     def resolve_references(self, nodes: list[_Element]) -> dict[str, _Element]:
-        """Map every node id, reference nodes included, to the place or transition."""
+        """Map every node id, reference nodes included, to the place or transition.
+
+        One pass: each reference chain is walked once and every reference on it remembers
+        where it ends, so a later reference stops at the first one already resolved (a
+        chain of n references costs n steps, not n^2). Errors are reported in document
+        order, at the same node as a walk of each chain from its start would find them.
+        """
         resolved: dict[str, _Element] = {}
         for element in nodes:
             if element.tag in ("place", "transition"):
                 resolved[element.attrs["id"]] = element
+        ends: dict[str, _Element] = {}  # reference id -> the place or transition it reaches
         for element in nodes:
             if element.tag not in ("referencePlace", "referenceTransition"):
                 continue
-            seen = [element.attrs["id"]]
-            current = element
-            while current.tag in ("referencePlace", "referenceTransition"):
-                ref = current.attrs.get("ref")
-                if ref is None:
-                    raise self.error(current, f"{current.describe()} has no ref")
-                target = self.ids.get(ref)
-                if target is None or target.tag not in _NODE_TAGS:
-                    nodes_ids = [i for i, e in self.ids.items() if e.tag in _NODE_TAGS]
-                    raise self.error(
-                        current,
-                        f"{current.describe()} refers to unknown node '{ref}'"
-                        f"{did_you_mean(ref, nodes_ids)}",
-                    )
-                if ref in seen:
-                    chain = " -> ".join([*seen, ref])
-                    raise self.error(
-                        element, f"{element.describe()} is part of a reference cycle {chain}"
-                    )
-                seen.append(ref)
-                current = target
+            current = self.reference_end(element, ends)
             wanted = "place" if element.tag == "referencePlace" else "transition"
             if current.tag != wanted:
                 raise self.error(
@@ -538,6 +525,42 @@ class _Reader:
                 )
             resolved[element.attrs["id"]] = current
         return resolved
+
+    def reference_end(self, element: _Element, ends: dict[str, _Element]) -> _Element:
+        """The place or transition the chain of references from ``element`` reaches;
+        every reference walked is added to ``ends``."""
+        path = [element.attrs["id"]]
+        on_path = {path[0]: 0}
+        current = element
+        while current.tag in ("referencePlace", "referenceTransition"):
+            known = ends.get(current.attrs["id"])
+            if known is not None:
+                current = known
+                break
+            ref = current.attrs.get("ref")
+            if ref is None:
+                raise self.error(current, f"{current.describe()} has no ref")
+            target = self.ids.get(ref)
+            if target is None or target.tag not in _NODE_TAGS:
+                nodes_ids = [i for i, e in self.ids.items() if e.tag in _NODE_TAGS]
+                raise self.error(
+                    current,
+                    f"{current.describe()} refers to unknown node '{ref}'"
+                    f"{did_you_mean(ref, nodes_ids)}",
+                )
+            if ref in on_path:
+                raise self.error(
+                    element,
+                    f"{element.describe()} is part of a reference cycle "
+                    f"{_cycle_text([*path, ref])}",
+                )
+            on_path[ref] = len(path)
+            path.append(ref)
+            current = target
+        for ident in path:
+            if ident != current.attrs["id"]:  # every other id on the path is a reference
+                ends[ident] = current
+        return current
 
     def arc_ends(self, arc: _Element, resolved: dict[str, _Element]) -> tuple[_Element, _Element]:
         ends = []
@@ -688,6 +711,15 @@ class _Reader:
 
 
 _NODE_TAGS = frozenset({"place", "transition", "referencePlace", "referenceTransition"})
+
+
+def _cycle_text(chain: list[str]) -> str:
+    """``a -> b -> a``; a long cycle shows its start and end and how many nodes it has."""
+    if len(chain) <= 10:
+        return " -> ".join(chain)
+    return f"{' -> '.join([*chain[:4], '...', *chain[-3:]])} ({len(chain) - 1} references)"
+
+
 _ID_ELEMENTS = _NODE_TAGS | {"arc", "page"}
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import time
 from pathlib import Path
 from typing import Any
 
@@ -477,3 +478,34 @@ def test_errors_from_a_file_name_the_path(tmp_path: Path) -> None:
 def test_pnml_error_is_a_value_error() -> None:
     with pytest.raises(ValueError):
         parse_pnml("<")
+
+
+def _reference_chain(length: int, *, cycle: bool = False) -> str:
+    """``r0 -> r1 -> ... -> p``: each reference names the next; ``cycle`` closes it."""
+    refs = (
+        "".join(f'<referencePlace id="r{k}" ref="r{k + 1}"/>' for k in range(length - 1))
+        + f'<referencePlace id="r{length - 1}" ref="{"r0" if cycle else "p"}"/>'
+    )
+    arcs = '<arc id="a" source="r0" target="t"/>'
+    return pnml(
+        '<place id="p"><initialMarking><text>1</text></initialMarking></place>'
+        + '<transition id="t"/>'
+        + refs
+        + arcs
+    )
+
+
+def test_a_long_reference_chain_resolves_in_one_pass() -> None:
+    text = _reference_chain(20_000)
+    start = time.perf_counter()
+    net = parse_pnml(text, "chain.pnml")
+    assert time.perf_counter() - start < 5.0  # walking each chain from its start: minutes
+    assert dict(net.transitions[0].inputs) == {"p": 1}
+
+
+def test_a_long_reference_cycle_is_refused_naming_the_node() -> None:
+    with pytest.raises(PnmlError) as caught:
+        parse_pnml(_reference_chain(20_000, cycle=True), "cycle.pnml")
+    message = str(caught.value)
+    assert "<referencePlace> 'r0' is part of a reference cycle r0 -> r1" in message
+    assert "-> r19999 -> r0 (20000 references)" in message
