@@ -60,6 +60,7 @@ from coral_lang.diagnostics import CoralError
 from coral_lang.mission import profile_digest
 from coral_lang.net import Net
 from coral_lang.profile import bundled_profile_path
+from coral_lang.safefile import UnreadableFile, read_text_file
 
 CERTIFICATE_FORMAT = 1
 Clock = Callable[[], dt.datetime]
@@ -251,15 +252,18 @@ def read_certificate(path: Path, how: str = "") -> dict[str, object]:
     would make the content a reader sees differ from what was signed, or crash it.
     """
     how = how or _how(path, None)
-    try:
-        size = path.stat().st_size
-        text = path.read_text(encoding="utf-8") if size <= MAX_CERTIFICATE_BYTES else ""
-    except FileNotFoundError:
-        raise CertificateError(f"{path}: no certificate; {how}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CertificateError(f"{path}: not a readable certificate ({exc}); {how}") from None
-    if size > MAX_CERTIFICATE_BYTES:
-        raise CertificateError(f"{path}: too large for a certificate ({size} bytes); {how}")
+    try:  # a regular file of bounded size: never a FIFO or /dev/zero
+        text = read_text_file(path, MAX_CERTIFICATE_BYTES)
+    except UnreadableFile as exc:
+        if exc.kind == "missing":
+            raise CertificateError(f"{path}: no certificate; {how}") from None
+        if exc.kind == "large":
+            raise CertificateError(
+                f"{path}: too large for a certificate ({exc.reason}); {how}"
+            ) from None
+        raise CertificateError(
+            f"{path}: not a readable certificate ({exc.reason}); {how}"
+        ) from None
     try:
         data = json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constant)
     except ValueError as exc:

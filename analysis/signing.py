@@ -262,14 +262,16 @@ def _parse_private(data: bytes, source: str) -> SigningKey:
 
 
 def _read_limited(path: Path, what: str) -> bytes:
-    try:
-        with path.open("rb") as handle:
-            data = handle.read(MAX_KEY_FILE_BYTES + 1)
-    except OSError as exc:
-        raise KeyFileError(f"{path}: cannot read {what} ({exc.strerror})") from None
-    if len(data) > MAX_KEY_FILE_BYTES:
-        raise KeyFileError(f"{path}: too large for a {what} (over {MAX_KEY_FILE_BYTES} bytes)")
-    return data
+    from coral_lang.safefile import UnreadableFile, read_file_bytes
+
+    try:  # a regular file of bounded size: never a FIFO or /dev/zero
+        return read_file_bytes(path, MAX_KEY_FILE_BYTES)
+    except UnreadableFile as exc:
+        if exc.kind == "large":
+            raise KeyFileError(
+                f"{path}: too large for a {what} (over {MAX_KEY_FILE_BYTES} bytes)"
+            ) from None
+        raise KeyFileError(f"{path}: cannot read {what} ({exc.reason})") from None
 
 
 # -- trust ----------------------------------------------------------------------------------

@@ -22,7 +22,7 @@ from __future__ import annotations
 import argparse
 import gc
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from coral_lang.diagnostics import CoralError
@@ -223,6 +223,7 @@ def _run(options: argparse.Namespace) -> int:
     if options.resume is not None:
         with EventLog.open(options.resume) as log:
             recorded = log.meta.get("mission_path")
+            recorded_profiles = _recorded_profiles(log.meta)
         if mission_path is None:
             if not isinstance(recorded, str):
                 print(
@@ -233,7 +234,7 @@ def _run(options: argparse.Namespace) -> int:
             mission_path = recorded
         out_dir = options.resume.parent
         if not profiles:
-            profiles = [load_profile(path) for path in _recorded_profiles(options.resume)]
+            profiles = [load_profile(path) for path in recorded_profiles]
     trusted = trust_store(options.trusted_keys)
     approved = approve_mission(
         mission_path, options.certificate, issue=options.verify, profiles=profiles, trusted=trusted
@@ -288,12 +289,10 @@ def _run(options: argparse.Namespace) -> int:
     return EXIT_OK if result.ok else EXIT_MISSION_FAILED
 
 
-def _recorded_profiles(log_path: Path) -> list[Path]:
-    """The profile files a run recorded in its log (``--resume`` without ``--profile``)."""
-    from runtime.eventlog import EventLog
-
-    with EventLog.open(log_path) as log:
-        recorded = log.meta.get("profiles")
+def _recorded_profiles(meta: Mapping[str, object]) -> list[Path]:
+    """The profile files a run recorded in its log's ``meta`` (``--resume`` without
+    ``--profile``), those that still exist."""
+    recorded = meta.get("profiles")
     if not isinstance(recorded, list):
         return []
     return [Path(p) for p in recorded if isinstance(p, str) and Path(p).is_file()]

@@ -56,6 +56,7 @@ from pathlib import Path
 
 from coral_lang.diagnostics import CoralError, did_you_mean
 from coral_lang.profile import CommandSpec, VehicleProfile
+from coral_lang.safefile import PROFILE_LIMIT, UnreadableFile, read_text_file
 
 __all__ = [
     "ANY",
@@ -265,10 +266,10 @@ def load_fault_plan(path: str | Path) -> FaultPlan:
             names ``FILE:LINE:COLUMN``.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FaultPlanError(f"{path}: cannot read fault plan: {exc}") from None
+    try:  # a regular file of bounded size: never a FIFO or /dev/zero
+        text = read_text_file(path, PROFILE_LIMIT)
+    except UnreadableFile as exc:
+        raise FaultPlanError(f"{path}: cannot read fault plan: {exc.reason}") from None
     return parse_fault_plan(text, str(path))
 
 

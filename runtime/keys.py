@@ -9,9 +9,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from coral_lang.diagnostics import CoralError
+from coral_lang.safefile import UnreadableFile, read_text_file
 from runtime.protocol import MIN_KEY_SIZE
 
 __all__ = ["KEY_HINT", "TRUSTED_KEYS_HELP", "KeyProblem", "load_psk"]
+
+KEY_FILE_LIMIT = 64 * 1024
+"""Largest key file read, in bytes (a key is 64 hex digits; room for white space)."""
 
 KEY_HINT = (
     f"give --key-file FILE or --key-hex HEX with at least {MIN_KEY_SIZE} bytes "
@@ -38,10 +42,10 @@ def load_psk(key_file: Path | None, key_hex: str | None, *, who: str = "this com
             `MIN_KEY_SIZE` bytes; the message says how to make one.
     """
     if key_file is not None:
-        try:
-            text = key_file.read_text(encoding="ascii")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise KeyProblem(f"cannot read the key file {key_file}: {exc}") from None
+        try:  # a regular file of bounded size: never a FIFO or /dev/zero
+            text = read_text_file(key_file, KEY_FILE_LIMIT)
+        except UnreadableFile as exc:
+            raise KeyProblem(f"cannot read the key file {key_file}: {exc.reason}") from None
         source = f"the key file {key_file}"
     elif key_hex is not None:
         text, source = key_hex, "--key-hex"

@@ -304,3 +304,29 @@ def test_a_port_in_non_ascii_digits_is_refused(capsys: pytest.CaptureFixture[str
         run_main([str(POOL_MISSION), "--vehicle", "127.0.0.1:\u0668\u0660"])
     assert exc.value.code == 2
     assert "expected HOST:PORT" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("reader", ["fault plan", "key file", "generic settings", "certificate"])
+def test_every_file_coral_reads_refuses_a_fifo(tmp_path: Path, reader: str) -> None:
+    """Each reader goes through coral_lang.safefile: a FIFO is refused, never waited on."""
+    import os
+
+    from analysis.certificate import CertificateError, read_certificate
+    from coral_lang.profile import load_bundled_profile
+    from runtime.faultplan import FaultPlanError, load_fault_plan
+    from runtime.keys import KeyProblem, load_psk
+    from runtime.vehicle.generic import SIMULATOR as GENERIC
+    from runtime.vehicle.registry import SimulatorError, SimulatorRequest
+
+    fifo = tmp_path / "input"
+    os.mkfifo(fifo)
+    with pytest.raises((FaultPlanError, KeyProblem, SimulatorError, CertificateError)) as exc:
+        if reader == "fault plan":
+            load_fault_plan(fifo)
+        elif reader == "key file":
+            load_psk(fifo, None)
+        elif reader == "generic settings":
+            GENERIC.create(SimulatorRequest(load_bundled_profile("ROMEO"), config=fifo))
+        else:
+            read_certificate(fifo)
+    assert "not a regular file" in str(exc.value)

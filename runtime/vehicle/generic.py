@@ -35,6 +35,7 @@ from pathlib import Path
 
 from coral_lang.diagnostics import ProfileError
 from coral_lang.profile import VehicleProfile
+from coral_lang.safefile import PROFILE_LIMIT, UnreadableFile, read_text_file
 from coral_lang.yamlsource import expect_keys, load_yaml
 from runtime.vehicle.handlers import HandlerVehicle, Job, Outcome
 from runtime.vehicle.model import TelemetryState
@@ -208,10 +209,12 @@ def load_generic_settings(path: Path) -> dict[str, float]:
     Raises:
         SimulatorError: unreadable file, bad YAML, an unknown field or a value out of range.
     """
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SimulatorError(f"{path}: cannot read the generic vehicle's settings: {exc}") from None
+    try:  # a regular file of bounded size: never a FIFO or /dev/zero
+        text = read_text_file(path, PROFILE_LIMIT)
+    except UnreadableFile as exc:
+        raise SimulatorError(
+            f"{path}: cannot read the generic vehicle's settings: {exc.reason}"
+        ) from None
     try:
         document = load_yaml(text, str(path))
         data = document.data if document.data is not None else {}

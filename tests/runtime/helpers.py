@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import re
+import signal
+import subprocess
+import time
 from pathlib import Path
 
 from analysis.certificate import CertificateCheck, check_certificate, make_certificate
@@ -47,3 +51,24 @@ def sign_file(path: Path) -> Path:
     test_key = session_signing_key()
     write_cert(sign_certificate(json.loads(path.read_text()), test_key.key), path)
     return test_key.public
+
+
+def kill_9_at(argv: list[str], line: str, *, settle: float, timeout: float = 120) -> list[str]:
+    """Run ``argv``, read its output until a line matches the regex ``line`` (or
+    ``timeout`` passes), wait ``settle`` seconds, then ``kill -9`` it.
+
+    Returns:
+        The output lines read, for the caller to check where the kill fell.
+    """
+    process = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    assert process.stdout is not None
+    seen = []
+    deadline = time.monotonic() + timeout
+    for text in process.stdout:
+        seen.append(text)
+        if re.match(line, text) or time.monotonic() > deadline:
+            break
+    time.sleep(settle)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    return seen

@@ -14,7 +14,6 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,7 +22,7 @@ import pytest
 
 from runtime.eventlog import EventLog
 from tests.conftest import EXAMPLES
-from tests.runtime.helpers import sign_file
+from tests.runtime.helpers import kill_9_at, sign_file
 
 BIN = Path(sys.executable).parent
 SURVEY = EXAMPLES / "survey_auv" / "survey.coral"
@@ -187,23 +186,12 @@ def test_kill_9_then_resume_against_the_generic_served_vehicle(tmp_path: Path, k
         "lan",
     ]
     try:
-        first = subprocess.Popen(
-            [str(BIN / "coral-run"), str(SURVEY), "--verify", "--out", str(out), *common],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        assert first.stdout is not None
-        seen = []
-        deadline = time.monotonic() + 120
         # Kill it during the first survey line, while the vehicle works on LINE_END? (#6).
-        for line in first.stdout:
-            seen.append(line)
-            if re.match(r"t=\S+ #6 ", line) or time.monotonic() > deadline:
-                break
-        time.sleep(0.3)
-        first.send_signal(signal.SIGKILL)
-        first.wait()
+        seen = kill_9_at(
+            [str(BIN / "coral-run"), str(SURVEY), "--verify", "--out", str(out), *common],
+            r"t=\S+ #6 ",
+            settle=0.3,
+        )
         assert any(re.match(r"t=\S+ #6 end_line1", line) for line in seen), "".join(seen)
 
         # No --profile now: the log recorded the profile file the run was compiled with.

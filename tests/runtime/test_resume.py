@@ -11,7 +11,6 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from collections import Counter
 from pathlib import Path
 
@@ -19,7 +18,7 @@ import pytest
 
 from runtime.eventlog import EventLog
 from tests.conftest import REPO
-from tests.runtime.helpers import POOL_MISSION, sign_file
+from tests.runtime.helpers import POOL_MISSION, kill_9_at, sign_file
 
 BIN = Path(sys.executable).parent
 
@@ -71,23 +70,12 @@ def test_kill_9_then_resume_loses_and_repeats_nothing(tmp_path: Path) -> None:
         "lan",
     ]
     try:
-        first = subprocess.Popen(
-            [str(BIN / "coral-run"), str(POOL_MISSION), "--verify", "--out", str(out), *common],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        assert first.stdout is not None
-        seen = []
-        deadline = time.monotonic() + 120
         # Kill it in the way-point phase, while the vehicle works on query #13 (XY?).
-        for line in first.stdout:
-            seen.append(line)
-            if re.match(r"t=\S+ #13 ", line) or time.monotonic() > deadline:
-                break
-        time.sleep(0.5)
-        first.send_signal(signal.SIGKILL)
-        first.wait()
+        seen = kill_9_at(
+            [str(BIN / "coral-run"), str(POOL_MISSION), "--verify", "--out", str(out), *common],
+            r"t=\S+ #13 ",
+            settle=0.5,
+        )
         assert any(re.match(r"t=\S+ #13 reach_wp", line) for line in seen), "".join(seen)
 
         # The first run trusted its own verification and wrote the certificate unsigned;
