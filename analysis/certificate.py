@@ -23,14 +23,22 @@ A certificate says nothing by itself: anyone can edit a JSON file. So the verifi
 signs it (`analysis.signing`: Ed25519 over its canonical JSON, in a ``signature``
 field), and the runtime passes the public keys it trusts (``trusted``): an unsigned
 certificate, one signed by an unknown key, or one edited after signing is refused, and
-so is one past its ``expires`` date. Given ``trusted``, every field the check reads is
+so is one past its ``expires`` date, or signed by a key the store revokes
+(`analysis.signing`). Given ``trusted``, every field the check reads is
 validated first (types, the integer format 1), and every property's own verdict is read:
 the top-level ``verdict`` is a summary, never trusted alone. Without ``trusted`` (checks
 of a net by ``coral-check`` or by tests) the signature is not looked at.
 
+A signature vouches for what the checker said, not that the checker was right: each
+certificate records the ``checker_revision`` that wrote it, and one whose proven
+properties were decided by a method with a known soundness bug at that revision
+(`analysis.soundness`) is refused, naming the bug; one without a revision counts as
+the oldest.
+
 A certificate is JSON (format documented in ``docs/verify.md``)::
 
-    {"format": 1, "tool": "coral", "tool_version": "0.1.0", "net": "pool_mission",
+    {"format": 1, "tool": "coral", "tool_version": "0.1.0", "checker_revision": 2,
+     "net": "pool_mission",
      "net_digest": "sha256:...", "verdict": "proven", "issued": "2026-11-21T07:00:00Z",
      "properties": [{"key": "deadlock", "verdict": "proven", "method": "...",
                      "required": true}, ...],
@@ -53,7 +61,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from analysis.report import Report, Verdict
-from analysis.signing import ALGORITHM, TrustStore, canonical_bytes
+from analysis.signing import ALGORITHM, SigningKey, TrustStore, canonical_bytes, sign_certificate
+from analysis.soundness import CHECKER_REVISION, OLDEST_REVISION, implicated
 from analysis.termination import certificate_gaps, required_keys
 from analysis.verify import VerifyOptions
 from coral_lang.diagnostics import CoralError
@@ -145,6 +154,7 @@ def make_certificate(
         "format": CERTIFICATE_FORMAT,
         "tool": "coral",
         "tool_version": tool_version(),
+        "checker_revision": CHECKER_REVISION,
         "net": report.net_name,
         "net_digest": report.digest,
         "sources": list(report.sources),
@@ -197,6 +207,8 @@ class CertificateCheck:
     store, so the signature was not looked at)."""
     expires: str | None = None
     """When it stops being accepted (None: no expiry recorded)."""
+    checker_revision: int = OLDEST_REVISION
+    """The checker revision that wrote it (`analysis.soundness`)."""
 
 
 def check_certificate(
@@ -223,13 +235,16 @@ def check_certificate(
     Raises:
         CertificateError: the file is missing, not a certificate or malformed (the
             message names the field); with ``trusted``: unsigned, signed by a key not
-            in it (named by key id), or edited after signing; expired; issued for
+            in it (named by key id), signed by a key it revokes, or edited after
+            signing; expired; issued for
             another net (the mission changed since it was verified) or, with
             ``profile_content``, against a profile that has changed since (the message
             names each changed field) or before certificates covered the profile; some
             required property missing or not proven, or it lacks a property this
-            version requires (it was issued by an older version). The message says
-            which, and how to get a valid one.
+            version requires (it was issued by an older version); a proven property
+            decided by a method with a known soundness bug at the certificate's checker
+            revision (`analysis.soundness`). The message says which, and how to get a
+            valid one.
     """
     path = Path(path)
     how = _how(path, profile_content)
@@ -384,6 +399,14 @@ def _check(
             f"({', '.join(gaps)}): it was issued by coral {version}, {what}; {how} with this "
             "version to get a new one"
         )
+    revision = _revision(data)
+    bugs = implicated(revision, listed, net)
+    if bugs:
+        raise CertificateError(
+            f"{path}: issued by coral {version} (checker revision {revision}), whose proofs "
+            f"rest on a known soundness bug: {'; '.join(b.describe() for b in bugs)}; "
+            f"re-verify with this version (checker revision {CHECKER_REVISION}): {how}"
+        )
     return CertificateCheck(
         path=str(path),
         net_digest=digest,
@@ -392,7 +415,50 @@ def _check(
         profile_digest=accepted_profile,
         signer=signer,
         expires=expires if isinstance(expires, str) else None,
+        checker_revision=revision,
     )
+
+
+def _revision(data: Mapping[str, object]) -> int:
+    """The certificate's checker revision (validated), the oldest when it records none."""
+    revision = data.get("checker_revision")
+    return revision if isinstance(revision, int) else OLDEST_REVISION
+
+
+def resign_certificate(path: str | Path, key: SigningKey, trusted: TrustStore) -> dict[str, object]:
+    """The certificate at ``path`` signed by ``key`` instead: key rotation without
+    verifying again.
+
+    Re-signing vouches for content someone else signed, so it is done only for a
+    certificate whose present signature is by a key ``trusted`` holds and does not
+    revoke, and which was not edited since; never with a key ``trusted`` revokes. The
+    content is kept byte for byte (only ``signature`` changes), so everything else the
+    runtime checks (net digest, profile, expiry, checker revision) is checked at run
+    time exactly as before: re-signing never revives an expired or known-unsound
+    certificate. A certificate whose signer is revoked must be verified again.
+
+    Raises:
+        CertificateError: unreadable, malformed, unsigned, signed by an unknown or
+            revoked key, edited after signing, or ``key`` itself is revoked.
+    """
+    path = Path(path)
+    how = _how(path, None)
+    data = read_certificate(path, how)
+    fmt = data.get("format")
+    if type(fmt) is not int or fmt != CERTIFICATE_FORMAT:
+        raise CertificateError(f"{path}: not a coral certificate (format must be the integer 1)")
+    _validate(path, data, how)
+    try:
+        _check_signature(path, data, trusted, how)
+    except RecursionError:
+        raise CertificateError(f"{path}: malformed certificate (nested too deeply)") from None
+    revoked = trusted.revocation(key.public.key_id)
+    if revoked is not None:
+        raise CertificateError(
+            f"the new signing key {key.public.key_id} is revoked ({revoked.reason}, "
+            f"{revoked.date}); create a new one with 'coral-check keygen --out FILE'"
+        )
+    return sign_certificate(data, key)
 
 
 def _validate(path: Path, data: Mapping[str, object], how: str) -> None:
@@ -410,6 +476,10 @@ def _validate(path: Path, data: Mapping[str, object], how: str) -> None:
     for field in ("tool_version", "net"):
         if field in data and not isinstance(data[field], str):
             raise bad(field, "a string")
+    if "checker_revision" in data:
+        revision = data["checker_revision"]
+        if type(revision) is not int or revision < 1:
+            raise bad("checker_revision", "a whole number of 1 or more")
     for field in ("options", "profile", "signature"):
         if field in data and not isinstance(data[field], dict):
             raise bad(field, "an object")
@@ -461,6 +531,14 @@ def _check_signature(path: Path, data: Mapping[str, object], trusted: TrustStore
         raise CertificateError(
             f"{path}: malformed certificate: 'signature' must have algorithm \"{ALGORITHM}\" "
             f"and string key_id and value; {how}"
+        )
+    revoked = trusted.revocation(kid)
+    if revoked is not None:
+        raise CertificateError(
+            f"{path}: signed by key {kid[:32]}, which was revoked on {revoked.date} "
+            f"({revoked.reason}; {revoked.source or trusted.describe()}): its signatures "
+            "are refused even if the key is also listed as trusted; get the mission "
+            "verified again and signed with a current key"
         )
     key = trusted.get(kid)
     if key is None:

@@ -6,6 +6,7 @@
     coral-check lint FILE...     compile and lint only: fast, for pre-commit hooks
     coral-check verify FILE      one file's verification report, and its certificate
     coral-check keygen --out KEY a key pair to sign certificates with (KEY, KEY.pub)
+    coral-check resign CERT      sign a certificate with a new key (key rotation)
     coral-check query NET ...    Model Checking Contest queries (analysis.query_cli)
 
 Exit codes (`analysis.outcome`): 0 no errors and every property proven; 1 errors in a
@@ -59,6 +60,7 @@ __all__ = [
     "build_keygen_parser",
     "build_lint_parser",
     "build_parser",
+    "build_resign_parser",
     "build_verify_parser",
     "main",
 ]
@@ -98,7 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
         "final markings, termination (no engine cycle, a final marking always reachable, "
         "every fair run ends in one), no dead transitions, no resource conflicts and the "
         "mission's own assertions. Also: 'coral-check lint FILE...' (lint only, fast, for "
-        "pre-commit hooks) and 'coral-check verify FILE' (one report, with --certificate). "
+        "pre-commit hooks), 'coral-check verify FILE' (one report, with --certificate), "
+        "'coral-check keygen' and 'coral-check resign' (signing keys and their rotation) "
+        "and 'coral-check query' (Model Checking Contest queries). "
         "Formats: text for a terminal, json (docs/verify.md), sarif (SARIF 2.1.0 for code "
         "scanning), html (one self-contained page with the net and counterexamples).",
         epilog=EXIT_CODES_HELP,
@@ -177,6 +181,38 @@ def build_verify_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def build_resign_parser() -> argparse.ArgumentParser:
+    """The parser for ``coral-check resign``."""
+    parser = argparse.ArgumentParser(
+        prog="coral-check resign",
+        description="Sign a certificate with another key, to rotate keys without "
+        "verifying again: the certificate's present signature must be by a key the trust "
+        "store trusts and does not revoke, and must match its content; only the "
+        "signature changes, so a run still checks everything else (net, profile, "
+        "expiry, checker revision). A certificate whose signer is revoked must be "
+        "verified again (coral-check verify ... --certificate FILE --signing-key KEY).",
+        epilog="exit codes: 0 re-signed, 2 bad usage, an unusable key or trust store, or a "
+        "certificate that cannot be re-signed (the message says why)",
+    )
+    parser.add_argument("certificate", metavar="CERT", help="the certificate to re-sign")
+    parser.add_argument(
+        "--signing-key",
+        metavar="KEY",
+        help=f"the new private key (default: ${SIGNING_KEY_ENV}, a key file or the PEM itself)",
+    )
+    parser.add_argument(
+        "--trusted-keys",
+        metavar="PATH",
+        help="trust store to check the present signature against: a file of public key "
+        "lines or a folder of .pub files, with any revocations (default: "
+        "$XDG_CONFIG_HOME/coral/trusted_keys)",
+    )
+    parser.add_argument(
+        "-o", "--output", metavar="OUT", help="write the re-signed certificate here (default: CERT)"
+    )
+    return parser
+
+
 def build_keygen_parser() -> argparse.ArgumentParser:
     """The parser for ``coral-check keygen``."""
     parser = argparse.ArgumentParser(
@@ -203,6 +239,14 @@ def _add_profile_options(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="YAML",
         help="vehicle profile to use instead of the bundled one of that name (repeatable)",
+    )
+    parser.add_argument(
+        "--include-path",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="a folder missions may include files from besides their own (repeatable, "
+        "searched in order after the including file's folder)",
     )
     parser.add_argument(
         "--link-rtt",
@@ -293,9 +337,10 @@ def _add_search_options(parser: argparse.ArgumentParser) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run coral-check; returns the exit code (see the module docstring).
 
-    ``coral-check lint ...``, ``coral-check verify ...`` and ``coral-check keygen ...``
-    are subcommands; anything else is a list of files to lint and verify (name a file
-    called ``lint`` or ``verify`` as ``./lint``).
+    ``coral-check lint ...``, ``coral-check verify ...``, ``coral-check keygen ...``,
+    ``coral-check resign ...`` and ``coral-check query ...`` are subcommands; anything
+    else is a list of files to lint and verify (name a file called ``lint`` or
+    ``verify`` as ``./lint``).
     """
     args_list = list(sys.argv[1:] if argv is None else argv)
     try:
@@ -305,6 +350,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _check_main(args_list[1:], lint_only=True)
         if args_list[:1] == ["keygen"]:
             return _keygen_main(args_list[1:])
+        if args_list[:1] == ["resign"]:
+            return _resign_main(args_list[1:])
         if args_list[:1] == ["query"]:
             from analysis.query_cli import query_main
 
@@ -335,6 +382,14 @@ def _output_folder_ok(output: str | None) -> bool:
     if output and not Path(output).resolve().parent.is_dir():
         _error(f"cannot write '{output}': no such folder")
         return False
+    return True
+
+
+def _include_path_ok(folders: list[str]) -> bool:
+    for folder in folders:
+        if not Path(folder).is_dir():
+            _error(f"--include-path {folder}: no such folder")
+            return False
     return True
 
 
@@ -408,7 +463,7 @@ def _check_main(argv: Sequence[str], lint_only: bool) -> int:
     if not _output_folder_ok(args.output):
         return EXIT_USAGE
     profiles = _profiles(args.profile)
-    if profiles is None:
+    if profiles is None or not _include_path_ok(args.include_path):
         return EXIT_USAGE
     # The structural facts (invariants, siphons...) appear in JSON and HTML only.
     options = None if lint_only else _verify_options(args, args.format in ("json", "html"))
@@ -418,7 +473,7 @@ def _check_main(argv: Sequence[str], lint_only: bool) -> int:
     outcomes: list[FileOutcome] = []
     printed = False
     for file in args.files:
-        outcome = _check_file(file, profiles, lint_options, options)
+        outcome = _check_file(file, profiles, lint_options, options, args.include_path)
         outcomes.append(outcome)
         if streaming:  # a terminal sees each file as soon as it is done
             block = render_outcome(outcome, lint_only=lint_only, color=color, quiet=args.quiet)
@@ -440,13 +495,14 @@ def _check_file(
     profiles: list[VehicleProfile],
     lint_options: LintOptions,
     options: VerifyOptions | None,
+    include_path: Sequence[str] = (),
 ) -> FileOutcome:
     """Compile (or import), verify unless ``options`` is None, and lint one file."""
     problem = _unreadable(file)
     if problem is not None:
         _error(f"cannot read '{file}': {problem}")
         return FileOutcome(path=file, input_error=problem)
-    result = load_net_file(Path(file), profiles)
+    result = load_net_file(Path(file), profiles, include_path=include_path)
     if result.net is None or result.errors:
         return make_outcome(file, result.diagnostics, sources=result.sources)
     if options is None:
@@ -492,13 +548,15 @@ def _render(
 # -- coral-check verify FILE -----------------------------------------------------------
 
 
-def _load(file: str, profiles: list[VehicleProfile]) -> CompileResult | None:
+def _load(
+    file: str, profiles: list[VehicleProfile], include_path: Sequence[str] = ()
+) -> CompileResult | None:
     """Compile or import ``file``, printing diagnostics; None if it cannot be read."""
     problem = _unreadable(file)
     if problem is not None:
         _error(f"cannot read '{file}': {problem}")
         return None
-    result = load_net_file(Path(file), profiles)
+    result = load_net_file(Path(file), profiles, include_path=include_path)
     if result.diagnostics:
         print(render_all(result.diagnostics, result.sources), file=sys.stderr)
     return result
@@ -513,13 +571,13 @@ def _verify_main(argv: list[str]) -> int:
     if not _output_folder_ok(args.output):
         return EXIT_USAGE
     profiles = _profiles(args.profile)
-    if profiles is None:
+    if profiles is None or not _include_path_ok(args.include_path):
         return EXIT_USAGE
     signing = _certificate_settings(args)
     if signing is None:
         return EXIT_USAGE
     key, expires = signing
-    result = _load(args.file, profiles)
+    result = _load(args.file, profiles, args.include_path)
     if result is None:
         return EXIT_USAGE
     if result.net is None or result.errors:
@@ -636,6 +694,77 @@ def _keygen_main(argv: list[str]) -> int:
     print(f"private key: {args.out} (keep it secret; the verifier signs with it)")
     print(f"public key: {public_path(Path(args.out))} (give it to operators: --trusted-keys)")
     return EXIT_OK
+
+
+# -- coral-check resign -------------------------------------------------------------------
+
+
+def _resign_main(argv: list[str]) -> int:
+    from analysis.certificate import CertificateError, resign_certificate, write_certificate
+    from analysis.signing import (
+        KeyFileError,
+        load_signing_key,
+        resolve_trust_store,
+        signing_key_from_env,
+    )
+
+    args = _parse(build_resign_parser(), argv)
+    if isinstance(args, int):
+        return args
+    output = Path(args.output or args.certificate)
+    if not _output_folder_ok(str(output)):
+        return EXIT_USAGE
+    key: SigningKey | None
+    try:
+        if args.signing_key is not None:
+            key = load_signing_key(args.signing_key)
+        else:
+            key = signing_key_from_env(os.environ)
+        trusted = resolve_trust_store(args.trusted_keys, os.environ)
+    except KeyFileError as exc:
+        _error(str(exc))
+        return EXIT_USAGE
+    if key is None:
+        _error(f"no signing key: give --signing-key KEY (or ${SIGNING_KEY_ENV})")
+        return EXIT_USAGE
+    try:
+        certificate = resign_certificate(args.certificate, key, trusted)
+    except CertificateError as exc:
+        _error(f"not re-signed: {exc}")
+        return EXIT_USAGE
+    old = _certificate_signer(args.certificate)
+    partial = output.with_name(f".{output.name}.{os.getpid()}.tmp")
+    try:  # a new file renamed over the old: never a half-written certificate
+        write_certificate(certificate, partial)
+        partial.replace(output)
+    except OSError as exc:
+        partial.unlink(missing_ok=True)
+        _error(f"cannot write '{output}': {exc.strerror}")
+        return EXIT_USAGE
+    print(
+        f"coral-check: {output}: re-signed by key {key.public.key_id} (was {old}); once "
+        "every certificate is re-signed, revoke the old key in the trust stores",
+        file=sys.stderr,
+    )
+    if trusted.get(key.public.key_id) is None:
+        print(
+            f"coral-check: note: key {key.public.key_id} is not in the trust store "
+            f"({trusted.describe()}): add its .pub line there before runs use {output}",
+            file=sys.stderr,
+        )
+    return EXIT_OK
+
+
+def _certificate_signer(path: str) -> str:
+    """The key id a certificate file names as its signer ("unknown" if unreadable)."""
+    from analysis.certificate import CertificateError, read_certificate
+
+    try:
+        signature = read_certificate(Path(path)).get("signature")
+    except CertificateError:
+        return "unknown"
+    kid = signature.get("key_id") if isinstance(signature, dict) else None
+    return kid if isinstance(kid, str) else "unknown"
 
 
 if __name__ == "__main__":

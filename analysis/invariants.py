@@ -23,7 +23,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-from analysis.structural import classify, incidence
+from analysis.structural import TooLargeForStructure, classify, incidence
 from coral_lang.net import Net
 
 Clock = Callable[[], float]
@@ -260,7 +260,11 @@ def p_invariants(
     n_p, n_t = len(net.places), len(net.transitions)
     if n_p * (n_p + n_t) > max_cells:
         return _basis("P", net.place_names, [], False, _too_large(n_p, "places"))
-    vectors, complete, reason = semiflows(incidence(net).rows(), max_rows, time_limit, clock)
+    try:
+        rows = incidence(net).rows()
+    except TooLargeForStructure as exc:  # a max_cells above the matrix's own limit
+        return _basis("P", net.place_names, [], False, str(exc))
+    vectors, complete, reason = semiflows(rows, max_rows, time_limit, clock)
     return _basis("P", net.place_names, vectors, complete, reason)
 
 
@@ -287,7 +291,11 @@ def t_invariants(
     n_p, n_t = len(net.places), len(net.transitions)
     if n_t * (n_t + n_p) > max_cells:
         return _basis("T", names, [], False, _too_large(n_t, "transitions"))
-    columns = [[int(v) for v in column] for column in incidence(net).matrix.T]
+    try:
+        matrix = incidence(net).matrix
+    except TooLargeForStructure as exc:  # a max_cells above the matrix's own limit
+        return _basis("T", names, [], False, str(exc))
+    columns = [[int(v) for v in column] for column in matrix.T]
     vectors, complete, reason = semiflows(columns, max_rows, time_limit, clock)
     return _basis("T", names, vectors, complete, reason)
 

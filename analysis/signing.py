@@ -17,6 +17,11 @@ Formats:
   names its signer by it, and refusals quote it.
 * signed bytes: the certificate's canonical JSON (`canonical_bytes`): sorted keys, no
   whitespace, ASCII only, without the ``signature`` field itself.
+* revocation: a line ``revoked <key id> <YYYY-MM-DD> <reason>`` in a trust store file,
+  or in a file named ``revoked`` in a trust store folder. A certificate signed by a
+  revoked key is refused even when the key is also listed as trusted: removing a key
+  line is easy to undo by accident (a backup, another copy of the folder), a revocation
+  line says on purpose that the key must never be accepted again, and why.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ __all__ = [
     "SIGNING_KEY_ENV",
     "KeyFileError",
     "PublicKey",
+    "Revocation",
     "SigningKey",
     "TrustStore",
     "canonical_bytes",
@@ -66,6 +72,11 @@ SIGNING_KEY_ENV = "CORAL_SIGNING_KEY"
 """Environment variable naming the private key file (or holding the PEM itself, for CI
 secrets) when ``--signing-key`` is not given."""
 TRUSTED_KEYS_NAME = "trusted_keys"
+REVOKED_NAME = "revoked"
+"""The file of revocation lines in a trust store folder."""
+REVOKED_WORD = "revoked"
+"""The first word of a revocation line."""
+KEY_ID_DIGITS = 16
 RAW_KEY_BYTES = 32
 MAX_KEY_FILE_BYTES = 64 * 1024
 """A key file or trust store file larger than this is not one: refused unread."""
@@ -295,55 +306,120 @@ def parse_public_key(line: str, source: str) -> PublicKey:
 
 
 @dataclass(frozen=True)
+class Revocation:
+    """A key that must never be accepted again: when and why (from ``source``)."""
+
+    key_id: str
+    date: str
+    reason: str
+    source: str = ""
+
+    def line(self) -> str:
+        """The line form, as written in a trust store."""
+        return f"{REVOKED_WORD} {self.key_id} {self.date} {self.reason}"
+
+
+def parse_revocation(line: str, source: str) -> Revocation:
+    """One ``revoked <key id> <YYYY-MM-DD> <reason>`` line; ``source`` names it in errors."""
+    import datetime as dt
+
+    parts = line.strip().split(maxsplit=3)
+    usage = f"expected '{REVOKED_WORD} KEY_ID YYYY-MM-DD REASON'"
+    if len(parts) < 4 or parts[0] != REVOKED_WORD:
+        raise KeyFileError(f"{source}: not a revocation line ({usage})")
+    kid, date, reason = parts[1], parts[2], parts[3].strip()
+    if len(kid) != KEY_ID_DIGITS or any(c not in "0123456789abcdef" for c in kid):
+        raise KeyFileError(
+            f"{source}: '{kid[:40]}' is not a key id ({KEY_ID_DIGITS} lowercase hex digits, "
+            "as 'coral-check keygen' prints); " + usage
+        )
+    try:
+        dt.date.fromisoformat(date)
+    except ValueError:
+        raise KeyFileError(f"{source}: '{date[:40]}' is not a date; {usage}") from None
+    return Revocation(kid, date, reason, source)
+
+
+@dataclass(frozen=True)
 class TrustStore:
-    """The public keys whose certificates the runtime accepts, by key id.
+    """The public keys whose certificates the runtime accepts, by key id, and the keys
+    it refuses whatever else it lists (``revoked``).
 
     ``sources`` lists the files read (for messages: "trusted keys: none (from X)").
     """
 
     keys: Mapping[str, PublicKey] = field(default_factory=dict)
     sources: tuple[str, ...] = ()
+    revoked: Mapping[str, Revocation] = field(default_factory=dict)
 
     @classmethod
-    def of(cls, keys: Iterable[PublicKey], source: str = "") -> TrustStore:
+    def of(
+        cls, keys: Iterable[PublicKey], source: str = "", revoked: Iterable[Revocation] = ()
+    ) -> TrustStore:
         """A store holding ``keys`` (tests, and the in-process key of ``--verify``)."""
-        return cls({k.key_id: k for k in keys}, (source,) if source else ())
+        return cls(
+            {k.key_id: k for k in keys},
+            (source,) if source else (),
+            {r.key_id: r for r in revoked},
+        )
 
     def get(self, wanted: str) -> PublicKey | None:
-        """The trusted key with id ``wanted``, if any."""
+        """The trusted key with id ``wanted``, if any (revoked or not: see `revocation`)."""
         return self.keys.get(wanted)
+
+    def revocation(self, wanted: str) -> Revocation | None:
+        """Why key ``wanted`` is revoked, if it is."""
+        return self.revoked.get(wanted)
 
     def describe(self) -> str:
         """Where the keys came from, for refusals."""
         where = ", ".join(self.sources) if self.sources else "no trust store"
-        return f"{len(self.keys)} trusted key(s) from {where}"
+        revoked = f", {len(self.revoked)} revoked" if self.revoked else ""
+        return f"{len(self.keys)} trusted key(s){revoked} from {where}"
 
 
 def load_trust_store(path: str | Path) -> TrustStore:
-    """The keys in ``path``: a file of public key lines, or a folder of ``*.pub`` files.
+    """The keys in ``path``: a file of public key lines, or a folder of ``*.pub`` files,
+    with the revocation lines of that file (or of the folder's ``revoked`` file and its
+    ``*.pub`` files).
 
     Raises:
-        KeyFileError: the path is missing, a file cannot be read, or a line is not a
-            public key (named by file and line number).
+        KeyFileError: the path is missing, a file cannot be read, or a line is neither a
+            public key nor a revocation (named by file and line number).
     """
     path = Path(path)
     if path.is_dir():
         files = sorted(p for p in path.glob("*.pub") if p.is_file())
+        revoked_file = path / REVOKED_NAME
+        if revoked_file.exists():
+            files.append(revoked_file)  # read (and refused if unreadable) like the rest
     elif path.is_file():
         files = [path]
     else:
         raise KeyFileError(f"{path}: no such trusted keys file or folder")
     keys: dict[str, PublicKey] = {}
+    revoked: dict[str, Revocation] = {}
     for file in files:
         try:
             text = _read_limited(file, "trusted keys file").decode("utf-8")
         except UnicodeDecodeError:
             raise KeyFileError(f"{file}: trusted keys file is not UTF-8 text") from None
         for number, line in enumerate(text.splitlines(), start=1):
-            if line.strip() and not line.lstrip().startswith("#"):
-                key = parse_public_key(line, f"{file}:{number}")
+            if not line.strip() or line.lstrip().startswith("#"):
+                continue
+            where = f"{file}:{number}"
+            if line.split(maxsplit=1)[0] == REVOKED_WORD:
+                revocation = parse_revocation(line, where)
+                revoked.setdefault(revocation.key_id, revocation)  # the first one says why
+            elif file.name == REVOKED_NAME and path.is_dir():
+                raise KeyFileError(
+                    f"{where}: a '{REVOKED_NAME}' file holds only revocation lines "
+                    f"('{REVOKED_WORD} KEY_ID YYYY-MM-DD REASON')"
+                )
+            else:
+                key = parse_public_key(line, where)
                 keys[key.key_id] = key
-    return TrustStore(keys, (str(path),))
+    return TrustStore(keys, (str(path),), revoked)
 
 
 def default_trust_path(environ: Mapping[str, str]) -> Path:

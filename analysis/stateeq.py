@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, ClassVar, Literal
 
 from analysis.invariants import InvariantBasis
 from analysis.siphons import maximal_trap
-from analysis.structural import DEFAULT_TIMEOUT_MS, incidence
+from analysis.structural import DEFAULT_TIMEOUT_MS, TooLargeForStructure, incidence
 from coral_lang.net import Net
 
 if TYPE_CHECKING:
@@ -263,14 +263,18 @@ def check_unreachable(
 
     Returns:
         `Proven` (unsat: no bad marking is reachable), `Candidate` (a solution that
-        still needs confirming), or `Unknown` (z3 gave up or a limit was hit).
+        still needs confirming), or `Unknown` (z3 gave up or a limit was hit, or the net
+        is too large for the dense incidence matrix: `TooLargeForStructure`).
     """
     import z3
 
     if invariants is not None and invariants.kind != "P":
         raise ValueError("the state equation is strengthened with P-invariants only")
     start = clock()
-    solver, marking, counts = _equation(net, bad, invariants, timeout_ms)
+    try:
+        solver, marking, counts = _equation(net, bad, invariants, timeout_ms)
+    except TooLargeForStructure as exc:
+        return Unknown(bad=bad, reason=str(exc), method=METHOD)
     traps: list[tuple[str, ...]] = []
     rounds = 0
     while True:

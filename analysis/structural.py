@@ -33,6 +33,27 @@ if TYPE_CHECKING:
 IntMatrix = npt.NDArray[np.int64]
 
 DEFAULT_TIMEOUT_MS = 10_000
+MAX_DENSE_CELLS = 25_000_000
+"""Places x transitions `incidence` builds: three int64 matrices of this many cells
+take 600 MB. ``analysis.verify`` stops at the same size before calling anything here;
+a direct call on a larger net gets `TooLargeForStructure` instead of exhausting memory."""
+
+
+class TooLargeForStructure(ValueError):
+    """The net is too large for the dense matrices of the structural method.
+
+    Callers turn it into an inconclusive answer that says so (``str(exc)`` is the
+    reason: "too large for the structural method (...)").
+    """
+
+    def __init__(self, places: int, transitions: int, limit: int) -> None:
+        self.places = places
+        self.transitions = transitions
+        super().__init__(
+            f"too large for the structural method ({places:,} places x {transitions:,} "
+            f"transitions = {places * transitions:,} cells, over the {limit:,}-cell limit "
+            "of its dense matrices)"
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,17 +79,24 @@ class Incidence:
         return [[int(v) for v in row] for row in self.matrix]
 
 
-def incidence(net: Net) -> Incidence:
+def incidence(net: Net, max_cells: int = MAX_DENSE_CELLS) -> Incidence:
     """Build the pre, post and incidence matrices of ``net`` (numpy int64).
 
     Args:
         net: Any net; transitions without arcs give zero columns.
+        max_cells: The largest places x transitions built (see `MAX_DENSE_CELLS`).
 
     Returns:
         The `Incidence` with rows in `Net.places` order and columns in
         `Net.transitions` order.
+
+    Raises:
+        TooLargeForStructure: places x transitions exceeds ``max_cells``; raised before
+            anything is allocated.
     """
     n_p, n_t = len(net.places), len(net.transitions)
+    if n_p * n_t > max_cells:
+        raise TooLargeForStructure(n_p, n_t, max_cells)
     pre = np.zeros((n_p, n_t), dtype=np.int64)
     post = np.zeros((n_p, n_t), dtype=np.int64)
     for t, tr in enumerate(net.transitions):
@@ -373,9 +401,11 @@ def _place_bound(
 
 __all__ = [
     "DEFAULT_TIMEOUT_MS",
+    "MAX_DENSE_CELLS",
     "Incidence",
     "NetClass",
     "StructuralBoundedness",
+    "TooLargeForStructure",
     "classify",
     "incidence",
     "structural_boundedness",

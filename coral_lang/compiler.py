@@ -52,6 +52,12 @@ from coral_lang.safefile import MISSION_LIMIT, UnreadableFile, is_within, read_t
 
 PENDING_SUFFIX = ".pending"
 FREE_SUFFIX = ".free"
+MAX_INCLUDED_BYTES = 16 * 1024 * 1024
+"""All the files of one mission (the mission and everything it includes) together: each
+file is bounded by ``MISSION_LIMIT``, and this bounds how many of them add up, so a
+mission including hundreds of large files is refused at the include that crossed it."""
+MAX_INCLUDED_FILES = 256
+"""Distinct files one mission may read (itself included)."""
 REQUIREMENTS = ("termination",)
 """What a ``require`` line may name: ``termination`` demands that every run of the
 mission (under the runtime's fairness) ends in a declared final marking."""
@@ -89,6 +95,7 @@ def compile_file(
     profiles: Sequence[VehicleProfile] = (),
     *,
     include_root: str | Path | None = None,
+    include_path: Sequence[str | Path] = (),
 ) -> CompileResult:
     """Compile the mission in ``path`` (and the files it includes).
 
@@ -96,11 +103,17 @@ def compile_file(
         path: the mission file.
         profiles: vehicle profiles to use before the bundled ones (matched by vehicle name).
         include_root: the folder every included file must lie in (symlinks followed);
-            default: the folder of ``path``. An include outside it is an error.
+            default: the folder of ``path``. An include outside it (and outside every
+            ``include_path`` folder) is an error.
+        include_path: more folders to look for included files in (``coral-check
+            --include-path``), in order, after the including file's own folder; files
+            in them may be included too.
     """
     path = Path(path)
     with cyclic_gc_paused():
-        compiler = _Compiler(profiles, Path(include_root) if include_root is not None else None)
+        compiler = _Compiler(
+            profiles, Path(include_root) if include_root is not None else None, include_path
+        )
         compiler.load_root(path)
         return compiler.finish()
 
@@ -112,14 +125,19 @@ def compile_source(
     base_dir: str | Path | None = None,
     *,
     include_root: str | Path | None = None,
+    include_path: Sequence[str | Path] = (),
 ) -> CompileResult:
-    """Compile mission ``text``; includes resolve against ``base_dir`` (default: cwd).
+    """Compile mission ``text``; includes resolve against ``base_dir`` (default: cwd),
+    then the ``include_path`` folders.
 
-    Included files must lie in ``include_root`` (default: ``base_dir``).
+    Included files must lie in ``include_root`` (default: ``base_dir``) or an
+    ``include_path`` folder.
     """
     base = Path(base_dir) if base_dir is not None else Path.cwd()
     with cyclic_gc_paused():
-        compiler = _Compiler(profiles, Path(include_root) if include_root is not None else base)
+        compiler = _Compiler(
+            profiles, Path(include_root) if include_root is not None else base, include_path
+        )
         compiler.load_text(text, file, base)
         return compiler.finish()
 
@@ -148,12 +166,18 @@ class _ConstInfo:
 
 class _Compiler:
     def __init__(
-        self, profiles: Sequence[VehicleProfile], include_root: Path | None = None
+        self,
+        profiles: Sequence[VehicleProfile],
+        include_root: Path | None = None,
+        include_path: Sequence[str | Path] = (),
     ) -> None:
         self.profiles = list(profiles)
-        # Every included file must lie below this folder (resolved); None: the root
-        # mission's folder, set when it is loaded.
+        # Every included file must lie below this folder (resolved) or one of
+        # include_dirs; None: the root mission's folder, set when it is loaded.
         self.include_root = include_root.resolve() if include_root is not None else None
+        self.include_dirs = tuple(Path(d).resolve() for d in include_path)
+        self.bytes_read = 0
+        self.over_limit = False  # an include crossed a limit: the rest are not read
         self.diagnostics: list[Diagnostic] = []
         self.sources: dict[str, str] = {}
         self.missions: list[ast.Mission] = []
@@ -168,6 +192,7 @@ class _Compiler:
     def load_root(self, path: Path) -> None:
         text = self._read(path, None)
         if text is not None:
+            self.bytes_read += len(text.encode("utf-8"))
             resolved = path.resolve()
             if self.include_root is None:
                 self.include_root = resolved.parent
@@ -217,17 +242,41 @@ class _Compiler:
             return
         if target in self.loaded:
             return  # included already (diamond): one copy of its declarations
+        if self.over_limit:
+            return  # reported once, at the include that crossed it
+        if len(self.loaded) + 1 > MAX_INCLUDED_FILES:
+            self._limit_crossed(include, f"more than {MAX_INCLUDED_FILES} files")
+            return
         text = self._read(target, include.span)
         if text is None:
             return
+        self.bytes_read += len(text.encode("utf-8"))
+        if self.bytes_read > MAX_INCLUDED_BYTES:
+            self._limit_crossed(
+                include, f"{self.bytes_read:,} bytes, over the {MAX_INCLUDED_BYTES:,}-byte limit"
+            )
+            return
         self.load_text(text, _display_path(target), target.parent, resolved=target, stack=stack)
+
+    def _limit_crossed(self, include: ast.Include, what: str) -> None:
+        self.over_limit = True
+        shown = _clip(include.path if include.path.isprintable() else repr(include.path))
+        self.error(
+            "CORAL004",
+            f"include {shown} brings the mission's files to {what}",
+            include.span,
+            f"a mission and everything it includes may be at most {MAX_INCLUDED_FILES} files "
+            f"and {MAX_INCLUDED_BYTES // (1024 * 1024)} MB together",
+        )
 
     def _include_target(self, include: ast.Include, base_dir: Path) -> Path | None:
         """The resolved file ``include`` names, or None (reported) when it is refused.
 
-        Included files must lie in the include root (the root mission's folder unless
-        given), after symlinks are followed: a mission must not read, and quote in its
-        error messages, files elsewhere (``include "/proc/self/environ"``).
+        A relative path names a file beside the including file or, when there is none,
+        in the first include-path folder that has it. Included files must lie in the
+        include root (the root mission's folder unless given) or an include-path folder,
+        after symlinks are followed: a mission must not read, and quote in its error
+        messages, files elsewhere (``include "/proc/self/environ"``).
         """
         shown = _clip(include.path if include.path.isprintable() else repr(include.path))
         if "\0" in include.path:
@@ -235,16 +284,23 @@ class _Compiler:
             return None
         try:
             target = (base_dir / include.path).resolve()
+            if not target.exists() and not Path(include.path).is_absolute():
+                found = (d / include.path for d in self.include_dirs)
+                target = next((f.resolve() for f in found if f.exists()), target)
         except (OSError, RuntimeError, ValueError) as exc:  # RuntimeError: symlink loop
             self.error("CORAL004", f"cannot include {shown}: {exc}", include.span)
             return None
         root = self.include_root if self.include_root is not None else base_dir.resolve()
-        if not is_within(target, root):
+        if not any(is_within(target, folder) for folder in (root, *self.include_dirs)):
+            where = f"the mission's folder {root}"
+            if self.include_dirs:
+                where += " and the include path " + ", ".join(map(str, self.include_dirs))
             self.error(
                 "CORAL004",
-                f"include {shown} is outside the mission's folder {root}",
+                f"include {shown} is outside {where}",
                 include.span,
-                "included files must lie in the folder of the mission being checked (or below it)",
+                "included files must lie in the folder of the mission being checked (or "
+                "below it), or in a folder given with --include-path",
             )
             return None
         return target

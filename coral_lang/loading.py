@@ -21,11 +21,20 @@ def is_pnml(path: str | Path) -> bool:
     return Path(path).suffix.lower() in PNML_SUFFIXES
 
 
-def load_net_file(path: str | Path, profiles: Sequence[VehicleProfile] = ()) -> CompileResult:
-    """Compile a mission or import a PNML model; problems come back as diagnostics."""
+def load_net_file(
+    path: str | Path,
+    profiles: Sequence[VehicleProfile] = (),
+    *,
+    include_path: Sequence[str | Path] = (),
+) -> CompileResult:
+    """Compile a mission or import a PNML model; problems come back as diagnostics.
+
+    ``include_path``: folders a mission's includes may also come from
+    (`coral_lang.compiler.compile_file`); a PNML model includes nothing.
+    """
     path = Path(path)
     if not is_pnml(path):
-        return compile_file(path, profiles)
+        return compile_file(path, profiles, include_path=include_path)
     from coral_lang.pnml import read_pnml
 
     try:

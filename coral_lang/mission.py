@@ -50,6 +50,8 @@ class Mission:
         profiles: the vehicle profiles it was compiled against: those given by the
             caller, in order, then the bundled one the compiler fell back to, if any.
         diagnostics: the compiler's warnings (a `Mission` exists only without errors).
+        include_path: the folders its includes could come from besides its own, as
+            given (a run records them, so ``coral-run --resume`` compiles it the same way).
     """
 
     path: Path | None
@@ -57,12 +59,14 @@ class Mission:
     sources: Mapping[str, str] = field(default_factory=dict, hash=False)
     profiles: tuple[VehicleProfile, ...] = ()
     diagnostics: tuple[Diagnostic, ...] = ()
+    include_path: tuple[Path, ...] = ()
 
     def __post_init__(self) -> None:
         # Read-only, so that a frozen Mission cannot have its sources edited behind it.
         object.__setattr__(self, "sources", MappingProxyType(dict(self.sources)))
         object.__setattr__(self, "profiles", tuple(self.profiles))
         object.__setattr__(self, "diagnostics", tuple(self.diagnostics))
+        object.__setattr__(self, "include_path", tuple(Path(p) for p in self.include_path))
 
     @classmethod
     def from_result(
@@ -70,8 +74,10 @@ class Mission:
         result: CompileResult,
         path: str | Path | None,
         profiles: Sequence[VehicleProfile] = (),
+        include_path: Sequence[str | Path] = (),
     ) -> Mission:
-        """The mission ``result`` describes, compiled from ``path`` with ``profiles``.
+        """The mission ``result`` describes, compiled from ``path`` with ``profiles``
+        (and its includes looked for in ``include_path`` too).
 
         Raises:
             CompileError: the compile had errors (every one is listed).
@@ -86,6 +92,7 @@ class Mission:
             sources=result.sources,
             profiles=used,
             diagnostics=tuple(result.diagnostics),
+            include_path=tuple(Path(p) for p in include_path),
         )
 
     @property
@@ -107,15 +114,22 @@ class Mission:
         return profile_digest(self.profile_content())
 
 
-def load_mission(path: str | Path, profiles: Sequence[VehicleProfile] = ()) -> Mission:
-    """Compile the mission in ``path`` against ``profiles`` (then the bundled ones).
+def load_mission(
+    path: str | Path,
+    profiles: Sequence[VehicleProfile] = (),
+    *,
+    include_path: Sequence[str | Path] = (),
+) -> Mission:
+    """Compile the mission in ``path`` against ``profiles`` (then the bundled ones);
+    its includes may also come from the ``include_path`` folders.
 
     Raises:
         CompileError: the mission does not compile; every error is listed, with its
             file, line and column.
     """
     path = Path(path)
-    return Mission.from_result(compile_file(path, profiles), path, profiles)
+    result = compile_file(path, profiles, include_path=include_path)
+    return Mission.from_result(result, path, profiles, include_path)
 
 
 def profile_content(net: Net, profile: VehicleProfile | None) -> dict[str, object]:

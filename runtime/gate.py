@@ -10,7 +10,9 @@ against: one issued for an older version of the profile, or before certificates
 recorded profiles at all, is refused (`analysis.certificate.check_certificate`).
 
 A run accepts only a certificate signed by a key in its trust store (``trusted``:
-``--trusted-keys``, else ``~/.config/coral/trusted_keys``; `analysis.signing`). With
+``--trusted-keys``, else ``~/.config/coral/trusted_keys``; `analysis.signing`) that the
+store does not revoke, written by a checker revision without a known soundness bug in
+the methods behind its proofs (`analysis.soundness`). With
 ``issue=True`` (``coral-run --verify``) the gate has just verified the net itself, in
 this process: it signs the certificate it made with a key generated for this call alone
 and checks it, in memory, against a store holding only that key, so the run goes through
@@ -124,10 +126,16 @@ def approve_mission(
     issue: bool = False,
     profiles: Sequence[VehicleProfile] = (),
     trusted: TrustStore | None = None,
+    include_path: Sequence[str | Path] = (),
 ) -> ApprovedMission:
     """Compile ``mission`` with ``profiles`` and check its certificate against
     ``trusted`` (default `trust_store`), or, if that fails and ``issue``, verify it here
     and approve it on that verification (see the module docstring).
+
+    ``include_path`` lists folders the mission's includes may come from besides its own
+    folder (``coral-run --include-path``; `coral_lang.compiler.compile_file`). It changes
+    only where files are found: the certificate covers the net they compile to, so the
+    same mission with the same included content passes with or without it.
 
     Raises:
         coral_lang.diagnostics.CompileError: the mission does not compile (for instance
@@ -137,7 +145,7 @@ def approve_mission(
             message lists what failed).
     """
     path = Path(mission)
-    compiled = load_mission(path, profiles)
+    compiled = load_mission(path, profiles, include_path=include_path)
     cert_path = Path(certificate) if certificate is not None else default_certificate_path(path)
     try:
         approval = check_mission_certificate(compiled, cert_path, trusted=trusted)
@@ -156,6 +164,7 @@ def approve_mission(
             if p.required and p.verdict.value != "proven"
         )
         options = "".join(f" --profile {p.file}" for p in profiles)
+        options += "".join(f" --include-path {folder}" for folder in include_path)
         raise CertificateError(
             f"{path}: verification did not pass ({failing}); run 'coral-check verify "
             f"{path}{options}' for the evidence, fix the mission, and run again"

@@ -325,3 +325,51 @@ def test_a_closed_pipe_ends_quietly() -> None:
         process.stdout.close()
         err = process.stderr.read().decode()
     assert process.returncode == 2 and "Traceback" not in err
+
+
+# -- refused input files: exit 2 with the reason, in every subcommand --------------------
+
+SUBCOMMANDS = {
+    "check": lambda f: [f],
+    "lint": lambda f: ["lint", f],
+    "verify": lambda f: ["verify", f],
+    "query": lambda f: ["query", f, "--examination", "ReachabilityDeadlock"],
+}
+
+
+def _refused_file(kind: str, folder: Path, suffix: str) -> tuple[str, str]:
+    """A path coral must refuse unread, and the reason it must give."""
+    path = folder / f"input{suffix}"
+    if kind == "fifo":
+        os.mkfifo(path)
+        return str(path), "not a regular file (a FIFO)"
+    if kind == "device":
+        return "/dev/zero", "not a regular file (a character device)"
+    if kind == "directory":
+        path.mkdir()
+        return str(path), "it is a directory"
+    if kind == "large":
+        with path.open("wb") as handle:  # sparse: no disk or memory spent on it
+            handle.truncate(65 * 1024 * 1024)
+        return str(path), "too large"
+    return str(path), "no such file"
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs FIFOs")
+@pytest.mark.parametrize("kind", ["fifo", "device", "directory", "large", "missing"])
+@pytest.mark.parametrize("subcommand", sorted(SUBCOMMANDS))
+def test_a_refused_input_file_exits_2_with_the_reason(
+    subcommand: str, kind: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for suffix in (".coral", ".pnml"):
+        if subcommand == "query" and suffix == ".coral":
+            continue  # query reads PNML only
+        folder = tmp_path / suffix[1:]
+        folder.mkdir()
+        file, reason = _refused_file(kind, folder, suffix)
+        assert main(SUBCOMMANDS[subcommand](file)) == 2, (subcommand, kind, suffix)
+        err = capsys.readouterr().err
+        if kind == "directory" and subcommand == "query":
+            reason = "is a folder without model.pnml"  # query also takes an MCC folder
+        assert reason in err and file in err, err
+        assert "Traceback" not in err

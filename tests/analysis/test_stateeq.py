@@ -228,3 +228,13 @@ def test_deadlock_freedom_is_proven_on_known_deadlock_free_models(name: str, met
     net: Net = read_pnml(Path(CONFORMANCE) / model["pnml"])
     result = check_unreachable(net, deadlocks(), timeout_ms=10_000, time_limit=30)
     assert isinstance(result, Proven) and result.method == method
+
+
+def test_a_net_past_the_dense_limit_is_inconclusive_not_a_memory_error() -> None:
+    from analysis.stateeq import Unknown, check_unreachable, deadlocks
+    from tests.analysis.test_structural import wide_net
+
+    result = check_unreachable(wide_net(), deadlocks())
+    assert isinstance(result, Unknown)
+    assert "too large for the structural method" in result.reason
+    assert "too large for the structural method" in result.explain()

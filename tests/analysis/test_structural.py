@@ -168,9 +168,11 @@ def test_public_surface_of_the_structural_modules() -> None:
     expected = {
         "analysis.structural": {
             "DEFAULT_TIMEOUT_MS",
+            "MAX_DENSE_CELLS",
             "Incidence",
             "NetClass",
             "StructuralBoundedness",
+            "TooLargeForStructure",
             "classify",
             "incidence",
             "structural_boundedness",
@@ -228,3 +230,52 @@ def test_public_surface_of_the_structural_modules() -> None:
         module = importlib.import_module(name)
         assert set(module.__all__) == names, name
         assert all(hasattr(module, n) for n in names), name
+
+
+# -- size guard -------------------------------------------------------------------------
+
+
+def wide_net(places: int = 100_000, transitions: int = 300) -> Net:
+    """``places`` places and ``transitions`` one-arc transitions: its dense matrices
+    would hold places x transitions cells (3e7 here, 720 MB as three int64 matrices),
+    but the net itself is a few megabytes of small objects."""
+    return make_net(
+        "wide",
+        {f"p{i}": 1 if i == 0 else 0 for i in range(places)},
+        {f"t{i}": ({f"p{i}": 1}, {f"p{i + 1}": 1}) for i in range(transitions)},
+    )
+
+
+def test_incidence_refuses_a_net_past_the_dense_limit_before_allocating() -> None:
+    import tracemalloc
+
+    from analysis.structural import MAX_DENSE_CELLS, TooLargeForStructure
+
+    net = wide_net()
+    assert len(net.places) * len(net.transitions) > MAX_DENSE_CELLS
+    tracemalloc.start()
+    try:
+        with pytest.raises(TooLargeForStructure) as refused:
+            incidence(net)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 1_000_000  # nothing near the 720 MB the matrices would take
+    message = str(refused.value)
+    assert message.startswith("too large for the structural method")
+    assert "100,000 places x 300 transitions" in message
+    # The limit is a parameter: the same net within a raised limit is built as usual,
+    # and a small net past a lowered one is refused the same way.
+    assert incidence(wide_net(1_000, 30), max_cells=30_000).matrix.shape == (1_000, 30)
+    with pytest.raises(TooLargeForStructure):
+        incidence(wide_net(1_000, 30), max_cells=29_999)
+
+
+def test_invariants_past_the_dense_limit_are_incomplete_with_the_reason() -> None:
+    from analysis.invariants import p_invariants, t_invariants
+
+    net = wide_net()
+    # A caller that lifts the elimination's own budget still meets the matrix's limit.
+    for basis in (p_invariants(net, max_cells=10**12), t_invariants(net, max_cells=10**12)):
+        assert not basis.complete and basis.invariants == ()
+        assert basis.reason.startswith("too large for the structural method")

@@ -155,3 +155,62 @@ def test_timing_refuses_the_profile_of_another_vehicle() -> None:
     mission = load_mission(POOL)
     with pytest.raises(ValueError, match="not for the net's vehicle ROMEO"):
         Timing(mission.net, profile=load_profile(MINNOW))
+
+
+def test_the_gate_compiles_with_an_include_path(tmp_path: Path, signing_key: TestKey) -> None:
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "missions").mkdir()
+    (tmp_path / "lib" / "common.coral").write_text(
+        "place done\ntransition finish wait { start } signal { done }\n"
+    )
+    mission = tmp_path / "missions" / "m.coral"
+    mission.write_text(
+        'mission m\nvehicle ROMEO\nplace start = 1\nfinal { done }\ninclude "common.coral"\n'
+    )
+    cert = tmp_path / "m.cert.json"
+    with pytest.raises(CompileError, match="file not found"):
+        approve_mission(mission, cert, issue=True, trusted=NOBODY)
+    lib = [tmp_path / "lib"]
+    issued = approve_mission(mission, cert, issue=True, trusted=NOBODY, include_path=lib)
+    assert issued.issued_now and "done" in issued.net.place_names
+    _sign_file(cert, signing_key)
+    again = approve_mission(mission, cert, trusted=signing_key.trusted, include_path=lib)
+    assert again.approval.net_digest == issued.net.digest() and not again.issued_now
+
+
+def test_the_gate_refuses_a_revoked_signer_and_a_known_unsound_revision(
+    tmp_path: Path, signing_key: TestKey
+) -> None:
+    from analysis.signing import Revocation
+
+    cert = tmp_path / "pool.cert.json"
+    approve_mission(POOL, cert, issue=True, trusted=NOBODY)
+    _sign_file(cert, signing_key)
+    kid = signing_key.key.public.key_id
+    revoked = TrustStore.of(
+        [signing_key.key.public], "store", [Revocation(kid, "2026-11-24", "rotated")]
+    )
+    with pytest.raises(CertificateError, match=f"key {kid}, which was revoked on 2026-11-24"):
+        approve_mission(POOL, cert, trusted=revoked)
+    # Signed, trusted, but resting on a method with a known bug at its revision: a net
+    # whose counts pass 2**60 and a certificate of revision 1 (as written before the fix).
+    pump = tmp_path / "pump.coral"
+    pump.write_text(
+        "mission pump\nvehicle ROMEO\nplace a = 1, b\nfinal { b }\n"
+        "transition t wait { a } signal { a, b*4611686018427387904 }\n"
+    )
+    compiled = load_mission(pump)
+    old = make_certificate(
+        verify(compiled.net, VerifyOptions(structural=False)),
+        profile_content=compiled.profile_content(),
+    )
+    old.pop("checker_revision")
+    old["verdict"] = "proven"
+    old["properties"] = [
+        {**p, "verdict": "proven", "method": "explicit state space"}
+        for p in old["properties"]  # type: ignore[attr-defined]
+    ]
+    pump_cert = tmp_path / "pump.cert.json"
+    write_certificate(sign_certificate(old, signing_key.key), pump_cert)
+    with pytest.raises(CertificateError, match=r"explorer-64-bit-wrap.*re-verify"):
+        approve_mission(pump, pump_cert, trusted=signing_key.trusted)
