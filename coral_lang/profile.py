@@ -2,8 +2,9 @@
 
 A profile (YAML) lists the commands a vehicle accepts, their parameters (name, type,
 unit, range), the reply kinds each can produce, the vehicle resources each drives, a
-nominal duration, and for tracking (space-trap) queries the tracking criterion. The schema is
-documented in ``docs/profiles.md``; ROMEO's profile (Table 1 of the paper) is bundled.
+nominal duration, and for tracking (space-trap) queries the tracking criterion; optionally
+the vehicle's workspace, which plots draw. The schema is documented in ``docs/profiles.md``;
+ROMEO's profile (Table 1 of the paper) is bundled.
 """
 
 from __future__ import annotations
@@ -63,6 +64,21 @@ class SpaceTrap:
     order: int
     eps: tuple[float, ...]
     window_s: float
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """Where the vehicle works (a pool, a survey box), in the missions' local frame in
+    metres: ``x`` north from ``x_min`` to ``x_max``, ``y`` east from ``y_min`` to ``y_max``.
+
+    Only drawn (``coral-run``'s telemetry plot outlines it), never enforced: a geofence
+    would have to be the vehicle's own, and a command's ranges already bound its targets.
+    """
+
+    x_min: float
+    x_max: float
+    y_min: float
+    y_max: float
 
 
 @dataclass(frozen=True)
@@ -135,6 +151,7 @@ class VehicleProfile:
     resources: tuple[str, ...]
     commands: tuple[CommandSpec, ...]
     file: str
+    workspace: Workspace | None = None
 
     def command(self, name: str) -> CommandSpec | None:
         """The command called ``name``, or None."""
@@ -209,7 +226,13 @@ def parse_profile(text: str, file: str = "<profile>") -> VehicleProfile:
     """Validate profile YAML ``text`` into a `VehicleProfile`."""
     doc = load_yaml(text, file)
     root = _mapping(doc, doc.data, "")
-    expect_keys(doc, root, "", ["vehicle", "commands"], ["description", "resources", "version"])
+    expect_keys(
+        doc,
+        root,
+        "",
+        ["vehicle", "commands"],
+        ["description", "resources", "version", "workspace"],
+    )
     name = _string(doc, root["vehicle"], "vehicle")
     if not name.isidentifier():
         raise doc.error(
@@ -231,7 +254,25 @@ def parse_profile(text: str, file: str = "<profile>") -> VehicleProfile:
         resources=resources,
         commands=commands,
         file=file,
+        workspace=_workspace(doc, root["workspace"]) if "workspace" in root else None,
     )
+
+
+def _workspace(doc: YamlDocument, node: Plain) -> Workspace:
+    """``workspace: {x: [min, max], y: [min, max]}``, metres, each min < max."""
+    spec = _mapping(doc, node, "workspace")
+    expect_keys(doc, spec, "workspace", ["x", "y"], [])
+    bounds: list[float] = []
+    for axis in ("x", "y"):
+        path = f"workspace.{axis}"
+        pair = _list(doc, spec[axis], path)
+        if len(pair) != 2:
+            raise doc.error(path, f"expected [min, max] in metres, got {len(pair)} values")
+        low, high = (_number(doc, value, f"{path}[{i}]") for i, value in enumerate(pair))
+        if low >= high:
+            raise doc.error(path, f"min {low:g} must be below max {high:g}")
+        bounds += [low, high]
+    return Workspace(*bounds)
 
 
 def _command(
