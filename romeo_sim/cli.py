@@ -7,8 +7,11 @@ not, 2 for a bad vehicle file or arguments.
 
 ``romeo-sim serve --key-file FILE`` serves the vehicle to a controller (the CORAL engine)
 on TCP and UDP (`runtime.vehicle.server.VehicleServer`) until Ctrl-C or ``--duration``; it
-prints ``listening on HOST:PORT`` first. The exit code is 0 after a clean stop, 2 for a
-missing or bad key, a bad vehicle file or arguments, 1 if the address cannot be bound.
+prints ``listening on HOST:PORT`` first; ``--log FILE`` writes the vehicle's event log
+(`runtime.vehicle.cli.VehicleLogFile`: created at the first controller's Hello, named
+after its wire mission id). The exit code is 0 after a clean stop, 2 for a missing or bad
+key, an existing log file, a bad vehicle file or arguments, 1 if the address cannot be
+bound.
 """
 
 from __future__ import annotations
@@ -85,7 +88,8 @@ def _add_serve_parser(commands: argparse._SubParsersAction[argparse.ArgumentPars
     key.add_argument(
         "--key-hex",
         metavar="HEX",
-        help="the pre-shared key as hex on the command line (visible to other users: tests only)",
+        help="the pre-shared key as hex on the command line; other users can see it in the "
+        "process list: prefer --key-file",
     )
     serve.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     serve.add_argument(
@@ -107,6 +111,13 @@ def _add_serve_parser(commands: argparse._SubParsersAction[argparse.ArgumentPars
         default=None,
         metavar="SECONDS",
         help="stop after this many wall-clock seconds (default: run until Ctrl-C)",
+    )
+    serve.add_argument(
+        "--log",
+        type=Path,
+        metavar="FILE",
+        help="write the vehicle's event log (SQLite) to this new file, created when the "
+        "first controller is adopted; its mission is the wire mission id in decimal",
     )
 
 
@@ -133,17 +144,33 @@ def _serve(args: argparse.Namespace) -> int:
         print(f"romeo-sim: {exc}", file=sys.stderr)
         return 2
     from romeo_sim.vehicle import Vehicle
+    from runtime.eventlog import EventLogError, log_key
+    from runtime.vehicle.cli import VehicleLogFile
     from runtime.vehicle.server import run_vehicle
 
-    return run_vehicle(
-        Vehicle(config, seed=args.seed),
-        key,
-        host=args.host,
-        port=args.port,
-        speed=args.speed,
-        duration=args.duration,
-        log=lambda line: print(f"romeo-sim: {line}", file=sys.stderr, flush=True),
-    )
+    event_log = None
+    if args.log is not None:
+        vehicle_file = None if args.vehicle is None else str(args.vehicle.resolve())
+        meta = {"seed": args.seed, "speed": args.speed, "vehicle": "ROMEO", "config": vehicle_file}
+        try:
+            event_log = VehicleLogFile(args.log, meta, mac_key=log_key(key))
+        except EventLogError as exc:
+            print(f"romeo-sim: {exc}", file=sys.stderr)
+            return 2
+    try:
+        return run_vehicle(
+            Vehicle(config, seed=args.seed),
+            key,
+            host=args.host,
+            port=args.port,
+            speed=args.speed,
+            duration=args.duration,
+            open_event_log=event_log,
+            log=lambda line: print(f"romeo-sim: {line}", file=sys.stderr, flush=True),
+        )
+    finally:
+        if event_log is not None:
+            event_log.close()
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -24,7 +24,8 @@ Decisions the paper leaves open (see docs/sim.md for the full list):
   a command id reused for another command) gets ``error`` with a detail; it never raises.
 * The watchdog arms at the first command (or `heard_from_controller`); after
   ``watchdog_s`` without either, the vehicle stops every task, pending queries reply
-  ``timeout``, and it surfaces by itself. It logs that as an event.
+  ``timeout``, and it surfaces by itself. It logs that as an event. The controller's
+  make-safe request (`Vehicle.make_safe`) does the same at once.
 """
 
 from __future__ import annotations
@@ -565,6 +566,23 @@ class Vehicle:
         self._emit(task.command_id, task.name, "done" if result.ok else "error", result.detail, now)
         self._log(now, f"{task.label()}: {'done' if result.ok else 'failed'}: {result.detail}")
 
+    def make_safe(self, reason: str) -> list[Reply]:
+        """The controller's make-safe request: what the watchdog does, at once.
+
+        Every task stops, pending queries reply ``timeout``, FIX_XY ``error``, and ROMEO
+        surfaces by itself; the watchdog then stays tripped until the controller speaks
+        again. Returns every reply due now, those included. Logged as an event.
+        """
+        now = self._clock
+        self._watchdog_tripped = True
+        self._log(
+            now, f"make-safe requested by the controller ({reason or 'no reason given'}); surfacing"
+        )
+        self._surface_now("stopped: the controller asked the vehicle to make itself safe", now)
+        out = self._outbox
+        self._outbox = []
+        return out
+
     def _trip_watchdog(self, now: float) -> None:
         self._watchdog_tripped = True
         silence = now - self._last_heard
@@ -572,7 +590,10 @@ class Vehicle:
             now,
             f"watchdog: no word from the controller for {silence:.1f} s; surfacing",
         )
-        why = "stopped by the watchdog"
+        self._surface_now("stopped by the watchdog", now)
+
+    def _surface_now(self, why: str, now: float) -> None:
+        """Stop every task and query with the watchdog's replies, and surface."""
         for task in {id(t): t for t in self._owners.values()}.values():
             self._stop(task, why, now)
         for query in list(self._queries):

@@ -11,33 +11,79 @@ writes the event logs to ``--out`` and draws the timeline.
 
 ``coral-run timeline LOG...`` merges a controller log and a vehicle log and plots them.
 
+Ctrl-C (SIGINT) and SIGTERM end a run cleanly: no new command is sent, the vehicle is
+asked to make itself safe (``MakeSafe``, acknowledged within a few seconds), the log is
+committed, the plots drawn, and one message says which signal, the mission time, whether
+the vehicle acknowledged, where the logs are and the ``--resume`` command. A second
+signal during that stop gives up waiting and ends at once.
+
 Exit codes: 0 the mission reached a declared final marking; 1 it ended otherwise
 (deadlock, the vehicle lost the mission, the time limit, an engine spin: a cycle of engine
 transitions that never waits for the vehicle); 2 bad usage or input (a mission that does
-not compile, no passing certificate, an unreadable log or key), never a run-time condition.
+not compile, no passing certificate, an unreadable log or key), never a run-time condition;
+130 stopped by SIGINT (Ctrl-C), 143 stopped by SIGTERM (128 + the signal number, the
+shell's convention for "ended by a signal").
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
+import signal
 import sys
-from collections.abc import Mapping, Sequence
+import threading
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
+from types import FrameType
+from typing import TYPE_CHECKING
 
 from coral_lang.diagnostics import CoralError
 from runtime.keys import TRUSTED_KEYS_HELP
 from runtime.vehicle.options import add_simulation_arguments, fault_plan_from_args
 
+if TYPE_CHECKING:
+    from runtime.controller import RunResult
+
 EXIT_OK = 0
 EXIT_MISSION_FAILED = 1
 EXIT_USAGE = 2
+EXIT_SIGINT = 128 + signal.SIGINT  # 130
+EXIT_SIGTERM = 128 + signal.SIGTERM  # 143
 
 EXIT_CODES_HELP = (
     "exit codes: 0 the mission reached a declared final marking, 1 it ended otherwise "
     "(deadlock, vehicle lost the mission, time limit, engine spin), 2 bad usage or input "
-    "(mission does not compile, no passing certificate, unreadable log or key)"
+    "(mission does not compile, no passing certificate, unreadable log or key), "
+    "130 stopped by Ctrl-C (SIGINT), 143 stopped by SIGTERM. On either signal the run "
+    "stops cleanly: no new command, the vehicle is asked to make itself safe (up to 5 s "
+    "for its acknowledgement), logs and plots are written, and the message gives the "
+    "'coral-run --resume LOG' command; a second signal ends at once"
 )
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM outside the run itself (while compiling, verifying, plotting): like Ctrl-C's
+    KeyboardInterrupt (a subclass, so asyncio lets it through at once as it does Ctrl-C),
+    it ends with a message and exit 143 rather than silently."""
+
+
+def _raise_terminated(signum: int, frame: FrameType | None) -> None:
+    raise _Terminated
+
+
+@contextlib.contextmanager
+def _sigterm_raises() -> Iterator[None]:
+    """SIGTERM raises `_Terminated` while ``coral-run`` works (main thread only); the run
+    itself installs its own handlers on its event loop (runtime.run)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _host_port(text: str) -> tuple[str, int]:
@@ -45,6 +91,36 @@ def _host_port(text: str) -> tuple[str, int]:
     if not sep or not host or not (port.isascii() and port.isdigit()) or not 0 < int(port) < 65536:
         raise argparse.ArgumentTypeError(f"expected HOST:PORT, got {text!r}")
     return host, int(port)
+
+
+def _ip_address(text: str) -> str:
+    """An IP address of this machine (``--telemetry-host``): checked by binding to it, so
+    a wrong one is bad usage here rather than a failure once the run has started."""
+    import ipaddress
+    import socket
+
+    try:
+        address = ipaddress.ip_address(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an IP address, got {text!r}") from None
+    family = socket.AF_INET6 if address.version == 6 else socket.AF_INET
+    try:
+        with socket.socket(family, socket.SOCK_DGRAM) as probe:
+            probe.bind((str(address), 0))
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(
+            f"{text} is not an address of this machine ({exc.strerror or exc})"
+        ) from None
+    return str(address)
+
+
+def _folder(text: str) -> Path:
+    """An existing folder (``--include-path``): a missing one is bad usage at once, not a
+    compile error that blames the mission's include."""
+    path = Path(text)
+    if not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: no such folder")
+    return path
 
 
 def _positive(text: str) -> float:
@@ -110,6 +186,15 @@ def build_run_parser() -> argparse.ArgumentParser:
         help="vehicle profile to use instead of the bundled one of that name (repeatable)",
     )
     parser.add_argument(
+        "--include-path",
+        action="append",
+        default=[],
+        type=_folder,
+        metavar="DIR",
+        help="a folder the mission may include files from besides its own (repeatable; "
+        "recorded in the log, so --resume finds it again)",
+    )
+    parser.add_argument(
         "--certificate",
         type=Path,
         metavar="FILE",
@@ -130,6 +215,14 @@ def build_run_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--key-file", type=Path, metavar="FILE", help="pre-shared key, hex")
     parser.add_argument("--key-hex", metavar="HEX", help="pre-shared key (prefer --key-file)")
+    parser.add_argument(
+        "--telemetry-host",
+        type=_ip_address,
+        metavar="ADDR",
+        help="with --vehicle: this machine's address on the vehicle's network, where "
+        "telemetry arrives (default: the address the routes pick to reach the vehicle; "
+        "0.0.0.0: every address)",
+    )
     parser.add_argument(
         "--out", type=Path, default=Path("out/run"), help="logs and plots go here (default out/run)"
     )
@@ -183,23 +276,75 @@ def main(argv: Sequence[str] | None = None) -> int:
     from runtime.engine import EngineSpin
 
     try:
-        return _run(options)
+        with _sigterm_raises():
+            return _run(options)
     except EngineSpin as exc:  # the controller ends a run on a spin; this is a safety net
         print(f"coral-run: mission failed: {exc}", file=sys.stderr)
         return EXIT_MISSION_FAILED
     except CoralError as exc:
         print(f"coral-run: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except _Terminated:
+        _interrupted("SIGTERM", options)
+        return EXIT_SIGTERM
     except KeyboardInterrupt:
-        print("coral-run: interrupted; resume with --resume", file=sys.stderr)
-        return EXIT_MISSION_FAILED
+        _interrupted("SIGINT", options)
+        return EXIT_SIGINT
+
+
+def _interrupted(name: str, options: argparse.Namespace) -> None:
+    """The message for a signal outside the mission run (before it started, or after)."""
+    log = options.resume if options.resume is not None else options.out / "controller.sqlite"
+    print(
+        f"coral-run: interrupted by {name} outside the mission run; if the mission had "
+        f"started, its log is {log}: continue with {_resume_command(options, log)}",
+        file=sys.stderr,
+    )
+
+
+def _resume_command(options: argparse.Namespace, log: Path) -> str:
+    """The ``coral-run --resume`` command line that continues this run."""
+    parts = ["coral-run", "--resume", str(log)]
+    if options.vehicle is not None:
+        parts += ["--vehicle", f"{options.vehicle[0]}:{options.vehicle[1]}"]
+    for flag, value in (
+        ("--key-file", options.key_file),
+        ("--certificate", options.certificate),
+        ("--trusted-keys", options.trusted_keys),
+        ("--link", options.link),
+    ):
+        if value is not None:
+            parts += [flag, str(value)]
+    if options.realtime:
+        parts.append("--realtime")
+        if options.speed != 1.0:
+            parts += ["--speed", f"{options.speed:g}"]
+    if options.verify:
+        parts.append("--verify")
+    return " ".join(parts)
+
+
+def _stopped_message(result: RunResult, options: argparse.Namespace, log: Path) -> str:
+    """The one message of a run stopped by a signal: which, when, the vehicle, what next."""
+    if result.made_safe:
+        vehicle = "the vehicle acknowledged the make-safe request (it stopped its commands)"
+    else:
+        vehicle = (
+            "the vehicle did NOT acknowledge the make-safe request: check it; its watchdog "
+            "makes it safe after its silence time-out"
+        )
+    return (
+        f"coral-run: stopped by {result.stopped_by} at mission time "
+        f"{result.mission_time:.1f} s; {vehicle}; logs in {log.parent}/; continue with: "
+        f"{_resume_command(options, log)}"
+    )
 
 
 def _run(options: argparse.Namespace) -> int:
     import secrets
 
     from coral_lang.profile import load_profile
-    from runtime.eventlog import EventLog
+    from runtime.eventlog import EventLog, log_key
     from runtime.gate import approve_mission, trust_store
     from runtime.keys import load_psk
     from runtime.link import load_link_profile
@@ -210,7 +355,8 @@ def _run(options: argparse.Namespace) -> int:
     profiles = [load_profile(path) for path in options.profile]
     faults = fault_plan_from_args(options)
     simulated = options.vehicle is None
-    if options.key_file is None and options.key_hex is None and simulated:
+    ephemeral = simulated and options.key_file is None and options.key_hex is None
+    if ephemeral:
         psk = secrets.token_bytes(32)  # the simulator runs in this process: a fresh key
     else:
         psk = load_psk(options.key_file, options.key_hex, who="coral-run")
@@ -220,10 +366,15 @@ def _run(options: argparse.Namespace) -> int:
     link = None if link_name is None else load_link_profile(link_name)
     mission_path = options.mission
     out_dir = options.out
+    include_path: list[Path] = list(options.include_path)
     if options.resume is not None:
-        with EventLog.open(options.resume) as log:
+        # Verified before its meta is believed (which mission, which profiles): with a
+        # real key the whole log must check out under it; an ephemeral key (a simulated
+        # run without --key-file) can verify nothing, and resume_mission says so.
+        with EventLog.open(options.resume, mac_key=None if ephemeral else log_key(psk)) as log:
             recorded = log.meta.get("mission_path")
             recorded_profiles = _recorded_profiles(log.meta)
+            recorded_include_path = _recorded_folders(log.meta)
         if mission_path is None:
             if not isinstance(recorded, str):
                 print(
@@ -231,13 +382,27 @@ def _run(options: argparse.Namespace) -> int:
                     file=sys.stderr,
                 )
                 return EXIT_USAGE
+            if not _exists(Path(recorded), Path.is_file):
+                print(
+                    f"coral-run: {options.resume} names the mission {recorded[:200]!r}, which "
+                    "is not a readable file; give MISSION",
+                    file=sys.stderr,
+                )
+                return EXIT_USAGE
             mission_path = recorded
         out_dir = options.resume.parent
         if not profiles:
             profiles = [load_profile(path) for path in recorded_profiles]
+        if not include_path:
+            include_path = recorded_include_path
     trusted = trust_store(options.trusted_keys)
     approved = approve_mission(
-        mission_path, options.certificate, issue=options.verify, profiles=profiles, trusted=trusted
+        mission_path,
+        options.certificate,
+        issue=options.verify,
+        profiles=profiles,
+        trusted=trusted,
+        include_path=include_path,
     )
     # The net and the compiler's objects live as long as the run: take them out of the
     # cyclic collector's scans, which otherwise grow with the net (bench/engine.py).
@@ -263,6 +428,8 @@ def _run(options: argparse.Namespace) -> int:
         simulator=options.simulator,
         sim_config=options.sim_config,
         faults=faults,
+        telemetry_host=options.telemetry_host,
+        log_key_ephemeral=ephemeral,
     )
     if options.resume is not None:
         result = resume_mission(approved, options.resume, config)
@@ -279,13 +446,22 @@ def _run(options: argparse.Namespace) -> int:
         print(result.summary())
     if result.detail:
         print(f"coral-run: {result.detail}", file=sys.stderr)
-    if not options.no_plots:
+    log_path = controller_log_path(out_dir)
+    if result.stopped_by:
+        # Printed before the plots: it is what the operator needs now, and a second
+        # signal during the plots must not lose it.
+        print(_stopped_message(result, options, log_path), file=sys.stderr, flush=True)
+    if not options.no_plots and result.stop_requests < 2:
         from runtime.timeline import merge_logs, plot_timeline
 
         logs = [p for p in (controller_log_path(out_dir), out_dir / "vehicle.sqlite") if p.exists()]
         for path in plot_timeline(merge_logs(logs), out_dir):
             print(f"coral-run: wrote {path}")
     print(f"coral-run: logs in {out_dir}/")
+    if result.stopped_by:
+        return {"SIGINT": EXIT_SIGINT, "SIGTERM": EXIT_SIGTERM}.get(
+            result.stopped_by, EXIT_MISSION_FAILED
+        )
     return EXIT_OK if result.ok else EXIT_MISSION_FAILED
 
 
@@ -295,7 +471,25 @@ def _recorded_profiles(meta: Mapping[str, object]) -> list[Path]:
     recorded = meta.get("profiles")
     if not isinstance(recorded, list):
         return []
-    return [Path(p) for p in recorded if isinstance(p, str) and Path(p).is_file()]
+    return [Path(p) for p in recorded if isinstance(p, str) and _exists(Path(p), Path.is_file)]
+
+
+def _recorded_folders(meta: Mapping[str, object]) -> list[Path]:
+    """The ``--include-path`` folders a run recorded in its log's ``meta``, those that
+    still exist (a missing one shows up as the include it was needed for)."""
+    recorded = meta.get("include_path")
+    if not isinstance(recorded, list):
+        return []
+    return [Path(p) for p in recorded if isinstance(p, str) and _exists(Path(p), Path.is_dir)]
+
+
+def _exists(path: Path, test: Callable[[Path], bool]) -> bool:
+    """``test(path)``, False where the path cannot even be looked at (a name too long,
+    a folder not readable): a path recorded in a log is data, not a promise."""
+    try:
+        return test(path)
+    except (OSError, ValueError):
+        return False
 
 
 def _timeline(options: argparse.Namespace) -> int:

@@ -19,7 +19,17 @@
   engine transitions that never waits for the vehicle) ends the run as ``spin``: the spin
   is logged with its cycle, nothing more is sent, and the connection is closed, so the
   vehicle's own watchdog (the ``silence_timeout`` of the handshake) stops its tasks and
-  surfaces it. The wire protocol has no message to stop a vehicle (docs/runtime.md).
+  surfaces it.
+* `Controller.request_stop` (``coral-run`` calls it on SIGINT and SIGTERM) ends the run
+  as ``stopped``: nothing new is sent, the vehicle is asked to make itself safe
+  (``MakeSafe``; on the current connection, or on a new one when there is none), the
+  controller waits up to ``make_safe_timeout`` seconds for its ``MakeSafeAck``, and the
+  log is committed. Replies that arrive meanwhile are not consumed: the vehicle keeps
+  them unacknowledged, so ``coral-run --resume`` consumes them. A second request gives
+  up the wait at once.
+
+Console lines show the mission time, seconds since this run started (``t=12.3``), not
+the loop's raw clock.
 
 Time is the running event loop's clock, so the same code runs in real time on sockets
 and instantly under `runtime.vclock.VirtualTimeLoop`.
@@ -32,8 +42,9 @@ import contextlib
 import enum
 import os
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 from runtime.engine import Engine, EngineSpin, Firing, Outcome, SentCommand, StepResult
 from runtime.eventlog import EventLog, TelemetrySample
@@ -46,6 +57,8 @@ from runtime.protocol import (
     Heartbeat,
     Hello,
     HelloReply,
+    MakeSafe,
+    MakeSafeAck,
     Rejected,
     RejectReason,
     Reply,
@@ -58,6 +71,8 @@ from runtime.protocol import (
 
 __all__ = ["Controller", "ControllerOptions", "RunEnd", "RunResult"]
 
+T = TypeVar("T")
+
 
 class RunEnd(enum.Enum):
     """How a run ended."""
@@ -68,6 +83,7 @@ class RunEnd(enum.Enum):
     TIME_LIMIT = "time-limit"  # the run's time limit passed first
     SPIN = "spin"  # the engine fired without end, never waiting for the vehicle (a cycle)
     LOG_BEHIND = "log-behind"  # the vehicle is ahead of the log: it lost its last commits
+    STOPPED = "stopped"  # the operator stopped the run (a signal); resume it later
 
 
 @dataclass(frozen=True)
@@ -87,6 +103,8 @@ class ControllerOptions:
         rejection_window: see ``max_rejections``.
         status_interval: print the status of the commands in flight this often.
         time_limit: end the run after this long (None: no limit).
+        make_safe_timeout: when the run is stopped, how long to wait for the vehicle to
+            acknowledge the make-safe request (connecting first if need be).
     """
 
     heartbeat_interval: float = 1.0
@@ -97,6 +115,7 @@ class ControllerOptions:
     rejection_window: float = 60.0
     status_interval: float = 30.0
     time_limit: float | None = None
+    make_safe_timeout: float = 5.0
 
 
 @dataclass
@@ -119,6 +138,16 @@ class RunResult:
     clock_syncs: list[ClockSync] = field(default_factory=list)
     detail: str = ""
     """Why the mission ended so, when there is more to say (a spin: its cycle)."""
+    stopped_by: str = ""
+    """What stopped the run (``SIGTERM``...), when it ended as ``stopped``."""
+    made_safe: bool | None = None
+    """Whether the vehicle acknowledged the make-safe request; None when none was sent."""
+    mission_time: float = 0.0
+    """Seconds from the start of this run to its end (what the console's ``t=`` counts)."""
+    deferred_replies: int = 0
+    """Replies received while stopping, left unconsumed for ``--resume``."""
+    stop_requests: int = 0
+    """How many stop requests came (a second one gives up waiting for the vehicle)."""
 
     @property
     def ok(self) -> bool:
@@ -140,6 +169,14 @@ class RunResult:
 
 class _ConnectionLost(Exception):
     """The current connection is gone or must be dropped; the reason is the message."""
+
+
+class _Interrupted(Exception):
+    """The operator asked the run to stop while the controller waited (`request_stop`)."""
+
+
+class _Stopped(Exception):
+    """The run was stopped during a live session, and make-safe was tried on it."""
 
 
 class _MissionLost(Exception):
@@ -179,6 +216,10 @@ class Controller:
         consumed: the last reply sequence number consumed (0 for a new mission).
         mission_known: whether the vehicle has already taken this mission (a ``resume``
             it then refuses means it lost the mission).
+        hello_sent: whether a `Hello` of this mission may already have reached the
+            vehicle: from then on every `Hello` asks to resume, so a vehicle that took
+            the mission keeps its reply ledger (and runs no command twice) even if the
+            controller died before hearing back.
         options: timings.
         nonces: source of the handshake nonces.
         console: receives human-readable progress lines.
@@ -194,6 +235,7 @@ class Controller:
         mission_id: int,
         consumed: int = 0,
         mission_known: bool = False,
+        hello_sent: bool = False,
         options: ControllerOptions | None = None,
         nonces: Callable[[int], bytes] = os.urandom,
         console: Callable[[str], None] = _print,
@@ -205,6 +247,7 @@ class Controller:
         self.mission_id = mission_id
         self.consumed = consumed
         self.mission_known = mission_known
+        self.hello_sent = hello_sent
         self.options = options or ControllerOptions()
         self._nonces = nonces
         self._console = console
@@ -218,6 +261,13 @@ class Controller:
         self._result: RunResult | None = None
         self._written: set[int] = set()  # command ids written on some connection already
         self._spin: EngineSpin | None = None  # the engine spun: the run is over
+        self._epoch: float | None = None  # loop time at which this run started
+        self._telemetry_port = 0
+        # Stopping: the reason, the wait a stop request cancels, a request not yet acted on.
+        self._stop_reason: str | None = None
+        self._stop_requests = 0
+        self._waiting: asyncio.Future[object] | None = None
+        self._interrupt_pending = False
 
     # ------------------------------------------------------------------ construction
 
@@ -235,6 +285,7 @@ class Controller:
     ) -> Controller:
         """Start ``engine``'s mission at ``now`` and commit its first step to ``log``."""
         controller = cls(engine, link, psk, log, mission_id=mission_id, **kwargs)  # type: ignore[arg-type]
+        controller._epoch = now
         marking = engine.marking_dict()
         try:
             step = engine.start(now)
@@ -286,6 +337,7 @@ class Controller:
             mission_id=mission_id,
             consumed=consumed,
             mission_known=bool(state.get("mission_known", True)),
+            hello_sent=bool(state.get("hello_sent", True)),
             **kwargs,  # type: ignore[arg-type]
         )
         # The dead controller may have written these already: sending them again is a
@@ -298,16 +350,77 @@ class Controller:
     def _now(self) -> float:
         return asyncio.get_running_loop().time()
 
+    def _t(self, when: float) -> float:
+        """``when`` (the loop's clock) as mission time: seconds since this run started."""
+        if self._epoch is None:
+            self._epoch = self._now()
+        return when - self._epoch
+
+    def request_stop(self, reason: str) -> None:
+        """Stop the run cleanly: no new command, make-safe, commit, end as ``stopped``.
+
+        For signal handlers (``loop.add_signal_handler``): it only records the request
+        and cancels the controller's current wait, so it is safe from any callback. A
+        second request while stopping gives up waiting for the vehicle's acknowledgement.
+
+        Args:
+            reason: what asked (``SIGTERM``...), for the log, the vehicle and the result.
+        """
+        if self._stop_reason is None:
+            self._stop_reason = reason
+        self._stop_requests += 1
+        waiting = self._waiting
+        if waiting is not None and not waiting.done():
+            waiting.cancel()
+        else:
+            self._interrupt_pending = True
+
+    async def _interruptible(self, aw: Awaitable[T], timeout: float | None = None) -> T:
+        """Await ``aw`` (within ``timeout``), or raise `_Interrupted` on a stop request.
+
+        Why a wrapper rather than cancelling the run: the controller must keep its
+        connection to send the make-safe request on it, so a stop only ends the wait.
+        """
+        if self._interrupt_pending:
+            self._interrupt_pending = False
+            if asyncio.iscoroutine(aw):
+                aw.close()
+            raise _Interrupted
+        fut: asyncio.Future[T] = asyncio.ensure_future(aw)
+        self._waiting = fut  # type: ignore[assignment]
+        requests = self._stop_requests
+        try:
+            if timeout is None:
+                return await fut
+            return await asyncio.wait_for(fut, max(timeout, 0.0))
+        except asyncio.CancelledError:
+            task = asyncio.current_task()
+            outer = task is not None and task.cancelling() > 0
+            if fut.cancelled() and self._stop_requests > requests and not outer:
+                raise _Interrupted from None
+            raise
+        finally:
+            if self._waiting is fut:
+                self._waiting = None
+
     async def run(self) -> RunResult:
         """Drive the mission to its end; returns what happened."""
         now = self._now()
+        if self._epoch is None:
+            self._epoch = now
         result = self._result = RunResult(RunEnd.FINAL, {}, now, now)
         if self._spin is None:
             await self._run(result, now)
         if self._spin is not None:
             result.end = RunEnd.SPIN
             result.detail = str(self._spin)
+        if result.end is RunEnd.STOPPED:
+            if result.made_safe is None:
+                result.made_safe = await self._make_safe_anew()
+            result.stopped_by = self._stop_reason or "stop request"
+        result.stop_requests = self._stop_requests
         result.ended_at = self._now()
+        result.mission_time = self._t(result.ended_at)
         result.marking = self.engine.marking_dict()
         self.log.event(
             result.ended_at,
@@ -315,6 +428,11 @@ class Controller:
             end=result.end.value,
             final=result.end is RunEnd.FINAL,
             marking=result.marking,
+            **(
+                {"stopped_by": result.stopped_by, "made_safe": result.made_safe}
+                if result.end is RunEnd.STOPPED
+                else {}
+            ),
         )
         if self._spin is None:
             self._commit()
@@ -328,7 +446,15 @@ class Controller:
     async def _run(self, result: RunResult, now: float) -> None:
         """Connect, and reconnect, until the mission ends; sets ``result.end``."""
         deadline = None if self.options.time_limit is None else now + self.options.time_limit
-        port = await self.link.open_telemetry(self._on_datagram)
+        try:
+            port = await self.link.open_telemetry(self._on_datagram)
+        except OSError as exc:
+            # Telemetry is for the operators; the mission runs without it rather than
+            # not at all (e.g. --telemetry-host removed from this machine since start-up).
+            port = 0
+            why = f"no telemetry: cannot open its socket ({exc.strerror or exc})"
+            self._note("note", why, detail=why)
+        self._telemetry_port = port
         attempt = 0
         try:
             while (outcome := self.engine.outcome()) is Outcome.RUNNING:
@@ -336,7 +462,7 @@ class Controller:
                     result.end = RunEnd.TIME_LIMIT
                     break
                 try:
-                    conn = await self.link.connect()
+                    conn = await self._interruptible(self.link.connect())
                 except ConnectionError as exc:
                     delay = self.options.reconnect_delays[
                         min(attempt, len(self.options.reconnect_delays) - 1)
@@ -347,7 +473,7 @@ class Controller:
                         f"cannot reach the vehicle ({exc}); retry in {delay:.1f} s",
                         reason=str(exc),
                     )
-                    await asyncio.sleep(delay)
+                    await self._interruptible(asyncio.sleep(delay))
                     continue
                 result.connections += 1
                 try:
@@ -359,7 +485,7 @@ class Controller:
                     delay = self.options.reconnect_delays[
                         min(attempt - 1, len(self.options.reconnect_delays) - 1)
                     ]
-                    await asyncio.sleep(delay)
+                    await self._interruptible(asyncio.sleep(delay))
                 finally:
                     conn.close()
             else:
@@ -373,11 +499,15 @@ class Controller:
             self._note("log-behind", str(exc))
         except EngineSpin:
             pass  # logged by `_on_reply`; `run` ends the mission as a spin
+        except _Stopped:
+            result.end = RunEnd.STOPPED  # make-safe was tried on the live connection
+        except _Interrupted:
+            result.end = RunEnd.STOPPED  # between connections: `run` makes safe anew
 
     async def _session(self, conn: Connection, port: int, deadline: float | None) -> None:
         """One connection: handshake, re-send, then replies until the mission ends."""
         codec = StreamCodec(self._psk, Role.CONTROLLER, self._nonces(NONCE_SIZE))
-        resume = self.mission_known or self.consumed > 0
+        resume = self._asks_resume()
         hello = Hello(codec.nonce, self._now(), self.mission_id, resume, self.consumed, port)
         self._write(conn, codec, hello)
         reply = await self._await_hello_reply(conn, codec)
@@ -410,12 +540,19 @@ class Controller:
         for sent in self.engine.in_flight():
             self._send_command(conn, codec, sent, resend=sent.command_id in self._written)
         self._console(
-            f"t={now:.1f} connected (one-way delay {sync.delay * 1000:.0f} ms, vehicle "
-            f"clock {sync.vehicle_ahead:+.3f} s); {len(self.engine.in_flight())} commands in flight"
+            f"t={self._t(now):.1f} connected (one-way delay {sync.delay * 1000:.0f} ms, "
+            f"vehicle clock at {sync.to_vehicle(now):.3f} s); "
+            f"{len(self.engine.in_flight())} commands in flight"
         )
         heartbeats = asyncio.create_task(self._heartbeats(conn, codec))
         try:
             await self._receive(conn, codec, deadline)
+        except _Interrupted:
+            assert self._result is not None
+            self._result.made_safe = await self._make_safe(
+                conn, codec, self.options.make_safe_timeout
+            )
+            raise _Stopped from None
         finally:
             heartbeats.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -428,7 +565,7 @@ class Controller:
             if left <= 0:
                 raise _ConnectionLost("no HelloReply in time")
             try:
-                data = await asyncio.wait_for(conn.read(), left)
+                data = await self._interruptible(conn.read(), left)
             except TimeoutError:
                 raise _ConnectionLost("no HelloReply in time") from None
             if not data:
@@ -452,7 +589,7 @@ class Controller:
                 return
             wait = silence if deadline is None else min(silence, deadline - now)
             try:
-                data = await asyncio.wait_for(conn.read(), max(wait, 0.0))
+                data = await self._interruptible(conn.read(), wait)
             except TimeoutError:
                 if deadline is not None and self._now() >= deadline:
                     return
@@ -534,7 +671,7 @@ class Controller:
             )
         else:
             self._console(
-                f"t={now:.1f} #{reply.command_id} replied {reply.kind}"
+                f"t={self._t(now):.1f} #{reply.command_id} replied {reply.kind}"
                 + (f" ({reply.detail})" if reply.detail else "")
             )
         self.consumed = reply.reply_seq
@@ -557,7 +694,7 @@ class Controller:
         else:
             self._result.commands_sent += 1
             self._console(
-                f"t={sent.sent_at:.1f} #{sent.command_id} {sent.transition}: "
+                f"t={self._t(sent.sent_at):.1f} #{sent.command_id} {sent.transition}: "
                 f"{sent.command.header()}"
             )
 
@@ -589,7 +726,129 @@ class Controller:
         self._log_firings(now, spin.prefix)
         self.log.event(now, "engine-spin", **spin.to_json())
         self.log.commit(None)
-        self._console(f"t={now:.1f} {spin}")
+        self._console(f"t={self._t(now):.1f} {spin}")
+
+    # ------------------------------------------------------------------ stopping
+
+    async def _make_safe(self, conn: Connection, codec: StreamCodec, timeout: float) -> bool:
+        """Ask the vehicle to make itself safe; True once it acknowledged within ``timeout``.
+
+        Replies that arrive meanwhile (the stopped commands' ``timeout`` and ``error``
+        among them) are neither consumed nor acknowledged: the vehicle keeps them, and
+        ``--resume`` consumes them in order. A second stop request ends the wait.
+        """
+        assert self._result is not None
+        reason = self._stop_reason or "stop request"
+        request_id = int.from_bytes(self._nonces(4), "big")
+        now = self._now()
+        end = now + timeout
+        try:
+            self._write(conn, codec, MakeSafe(request_id, now, reason))
+        except (ConnectionError, OSError) as exc:
+            self._note("make-safe-failed", f"make-safe not sent: {exc}", reason=str(exc))
+            return False
+        self.log.event(now, "make-safe-sent", request_id=request_id, reason=reason)
+        self.log.commit(None)
+        self._console(
+            f"t={self._t(now):.1f} stopping ({reason}): asked the vehicle to make itself safe; "
+            f"waiting up to {timeout:.1f} s for its acknowledgement"
+        )
+        while (left := end - self._now()) > 0:
+            try:
+                data = await self._interruptible(conn.read(), left)
+            except TimeoutError:
+                break
+            except _Interrupted:
+                self._note("make-safe-abandoned", "second stop request: not waiting any longer")
+                return False
+            if not data:
+                break
+            for item in codec.feed(data):
+                if isinstance(item, MakeSafeAck) and item.request_id == request_id:
+                    self.log.event(
+                        self._now(),
+                        "make-safe-acked",
+                        request_id=request_id,
+                        vehicle_time=item.vehicle_time,
+                        first=item.first,
+                    )
+                    return True
+                if isinstance(item, Reply):
+                    self._result.deferred_replies += 1
+                elif isinstance(item, Rejected):
+                    self._result.rejected_frames += 1
+                    self.log.event(
+                        self._now(), "rejected", reason=item.reason.value, detail=item.detail
+                    )
+        self._note(
+            "make-safe-unacknowledged",
+            f"the vehicle did not acknowledge make-safe within {timeout:.1f} s",
+        )
+        return False
+
+    async def _make_safe_anew(self) -> bool:
+        """Make-safe when the stop came between connections: connect, shake hands, ask.
+
+        All within ``make_safe_timeout``. The request goes only on a connection the
+        vehicle resumed the mission on (or a mission it never had): a vehicle that lost
+        the mission is left alone, so as not to start a new one under its id.
+        """
+        budget = self.options.make_safe_timeout
+        end = self._now() + budget
+        conn: Connection | None = None
+        try:
+            conn = await self._interruptible(self.link.connect(), budget)
+            codec = StreamCodec(self._psk, Role.CONTROLLER, self._nonces(NONCE_SIZE))
+            resume = self._asks_resume()
+            hello = Hello(
+                codec.nonce,
+                self._now(),
+                self.mission_id,
+                resume,
+                self.consumed,
+                self._telemetry_port,
+            )
+            self._write(conn, codec, hello)
+            reply = await self._interruptible(
+                self._await_hello_reply(conn, codec), end - self._now()
+            )
+            if resume and not reply.resumed and self.mission_known:
+                self._note(
+                    "make-safe-failed",
+                    "make-safe not sent: the vehicle no longer knows the mission",
+                )
+                return False
+            return await self._make_safe(conn, codec, max(0.0, end - self._now()))
+        except (ConnectionError, OSError, TimeoutError, _ConnectionLost) as exc:
+            self._note(
+                "make-safe-failed",
+                f"make-safe not sent: cannot reach the vehicle ({exc or 'no answer in time'})",
+                reason=str(exc),
+            )
+            return False
+        except _Interrupted:
+            self._note("make-safe-abandoned", "second stop request: not trying any longer")
+            return False
+        finally:
+            if conn is not None:
+                conn.close()
+
+    def _asks_resume(self) -> bool:
+        """Whether the next `Hello` asks to resume; commits that one is on its way.
+
+        A `Hello` that does not ask makes the vehicle start the mission afresh, with a new
+        reply ledger. Once a `Hello` may have reached it, that would run again every
+        command the vehicle already carried out: a controller killed after sending INIT
+        but before any reply or heartbeat came back (so before ``mission_known``) used to
+        do exactly that on ``--resume``. So the first `Hello` of a mission is committed as
+        sent before it is written, and every later one asks; a vehicle that never took
+        the mission answers "not resumed" and starts it, which is then right.
+        """
+        resume = self.mission_known or self.consumed > 0 or self.hello_sent
+        if not self.hello_sent:
+            self.hello_sent = True
+            self._commit()
+        return resume
 
     def _commit(self) -> None:
         self.log.commit(
@@ -598,6 +857,7 @@ class Controller:
                 "mission_id": self.mission_id,
                 "consumed": self.consumed,
                 "mission_known": self.mission_known,
+                "hello_sent": self.hello_sent,
             }
         )
 
@@ -689,4 +949,4 @@ class Controller:
     def _note(self, kind: str, text: str, **data: object) -> None:
         now = self._now()
         self.log.event(now, kind, **data)
-        self._console(f"t={now:.1f} {text}")
+        self._console(f"t={self._t(now):.1f} {text}")

@@ -328,6 +328,14 @@ class EmulatedLink:
         self._live: dict[EmulatedConnection, None] = {}
         self._numbers = 0
         self._closed = False
+        # The loop's clock when the link was first used: log lines give times since then,
+        # as the controller's console does (a real-time loop's clock is the raw monotonic
+        # one, e.g. t=1682.6, which tells an operator nothing).
+        self._t0: float | None = None
+
+    def _mission_time(self, t: float) -> float:
+        """``t`` on the loop's clock, as seconds since the link was first used."""
+        return t - (self._t0 if self._t0 is not None else 0.0)
 
     # ------------------------------------------------------------------ connections
 
@@ -338,6 +346,8 @@ class EmulatedLink:
         if self.emulator is None:
             return None
         loop = asyncio.get_running_loop()
+        if self._t0 is None:
+            self._t0 = loop.time()
         attempt = self.emulator.connect(loop.time())
         if attempt.latency > 0.0:
             await asyncio.sleep(attempt.latency)
@@ -348,7 +358,8 @@ class EmulatedLink:
         assert outage is not None
         self._note_outage(outage, "connection attempts fail")
         raise ConnectionError(
-            f"the vehicle cannot be reached: link outage until t={outage.end:.1f} s"
+            "the vehicle cannot be reached: link outage until "
+            f"t={self._mission_time(outage.end):.1f} s"
         )
 
     def _failed(self, reason: str) -> ConnectionError:
@@ -377,7 +388,10 @@ class EmulatedLink:
         else:
             self.stats.resets += 1
             now = asyncio.get_running_loop().time()
-            self._log(f"link: connection {conn.number} reset at t={now:.1f} s, {in_flight}")
+            self._log(
+                f"link: connection {conn.number} reset at t={self._mission_time(now):.1f} s, "
+                f"{in_flight}"
+            )
 
     def _note_outage(self, outage: Outage, what: str) -> None:
         """Count and log an outage the first time it shows (later effects are counted)."""
@@ -386,7 +400,8 @@ class EmulatedLink:
         self._seen_outages.add(outage)
         self.stats.outages += 1
         self._log(
-            f"link: outage from t={outage.start:.1f} s to t={outage.end:.1f} s "
+            f"link: outage from t={self._mission_time(outage.start):.1f} s "
+            f"to t={self._mission_time(outage.end):.1f} s "
             f"({outage.end - outage.start:.1f} s): {what}"
         )
 

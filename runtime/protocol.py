@@ -9,7 +9,9 @@ What travels where (after the paper, Bruzzone et al., sections III-IV):
 * Stream (TCP), both directions, framed and authenticated: the handshake (`Hello`,
   `HelloReply`, which also carries the times for the paper's INIT clock offset), commands
   (`Command`), the vehicle's replies (`Reply`), the controller's acknowledgement of replies
-  (`ReplyAck`) and `Heartbeat`. One `StreamCodec` per connection encodes and decodes them.
+  (`ReplyAck`), the controller's request that the vehicle make itself safe at once
+  (`MakeSafe`, answered by `MakeSafeAck`) and `Heartbeat`. One `StreamCodec` per
+  connection encodes and decodes them.
 * Datagrams (UDP), vehicle to controller: `Telemetry`, sequence-numbered; `DatagramReceiver`
   drops late and duplicate ones.
 
@@ -57,6 +59,8 @@ __all__ = [
     "Heartbeat",
     "Hello",
     "HelloReply",
+    "MakeSafe",
+    "MakeSafeAck",
     "ParamValue",
     "ProtocolError",
     "RejectReason",
@@ -137,6 +141,8 @@ class FrameType(enum.IntEnum):
     COMMAND = 0x10
     REPLY = 0x11
     REPLY_ACK = 0x12
+    MAKE_SAFE = 0x13
+    MAKE_SAFE_ACK = 0x14
     HEARTBEAT = 0x20
     TELEMETRY = 0x40
 
@@ -250,6 +256,45 @@ class ReplyAck:
 
 
 @dataclass(frozen=True)
+class MakeSafe:
+    """Controller to vehicle: stop everything and make yourself safe now (the watchdog's
+    behaviour, without waiting for the silence).
+
+    Sent when the operator stops the controller (Ctrl-C, SIGTERM), so a vehicle is never
+    left running a mission nobody drives. The vehicle answers `MakeSafeAck`; the replies
+    its stopped commands give go into the mission's reply ledger as usual, so a later
+    resume consumes them.
+
+    Attributes:
+        request_id: chosen by the controller (unsigned 32-bit); a repeat of an id the
+            vehicle already carried out for this mission is acknowledged again, not
+            carried out twice.
+        sent_at: the controller's clock when it sent the request.
+        reason: short text for the vehicle's log (UTF-8, at most 200 bytes, may be empty).
+    """
+
+    request_id: int
+    sent_at: float
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class MakeSafeAck:
+    """Vehicle to controller: the `MakeSafe` ``request_id`` has been carried out.
+
+    Attributes:
+        request_id: the request's id.
+        vehicle_time: the vehicle's clock when it made itself safe (or acknowledged again).
+        first: True when this request made the vehicle safe now, False for a repeat of a
+            request id it had already carried out (nothing was done again).
+    """
+
+    request_id: int
+    vehicle_time: float
+    first: bool = True
+
+
+@dataclass(frozen=True)
 class Heartbeat:
     """Either direction: I am alive; ``sent_at`` is the sender's clock."""
 
@@ -287,7 +332,9 @@ class Telemetry:
     est_y: float | None = None
 
 
-StreamMessage: TypeAlias = Hello | HelloReply | Command | Reply | ReplyAck | Heartbeat
+StreamMessage: TypeAlias = (
+    Hello | HelloReply | Command | Reply | ReplyAck | MakeSafe | MakeSafeAck | Heartbeat
+)
 
 
 class RejectReason(enum.Enum):
@@ -417,6 +464,8 @@ _HELLO_REPLY = struct.Struct(">16s16sddBId")
 _COMMAND_HEAD = struct.Struct(">Id")
 _REPLY_HEAD = struct.Struct(">II")
 _U32S = struct.Struct(">I")
+_MAKE_SAFE_HEAD = struct.Struct(">Id")
+_MAKE_SAFE_ACK = struct.Struct(">IdB")
 _PARAM_FLOAT, _PARAM_INT, _PARAM_TEXT = 1, 2, 3
 
 
@@ -456,6 +505,17 @@ def _encode_payload(msg: StreamMessage) -> tuple[FrameType, bytes]:
         )
     if isinstance(msg, ReplyAck):
         return FrameType.REPLY_ACK, _U32S.pack(_uint(msg.reply_seq, _U32, "ReplyAck.reply_seq"))
+    if isinstance(msg, MakeSafe):
+        return FrameType.MAKE_SAFE, _MAKE_SAFE_HEAD.pack(
+            _uint(msg.request_id, _U32, "MakeSafe.request_id"),
+            _finite(msg.sent_at, "MakeSafe.sent_at"),
+        ) + _text(msg.reason, MAX_DETAIL_BYTES, "make-safe reason", empty=True)
+    if isinstance(msg, MakeSafeAck):
+        return FrameType.MAKE_SAFE_ACK, _MAKE_SAFE_ACK.pack(
+            _uint(msg.request_id, _U32, "MakeSafeAck.request_id"),
+            _finite(msg.vehicle_time, "MakeSafeAck.vehicle_time"),
+            1 if msg.first else 0,
+        )
     if isinstance(msg, Heartbeat):
         return FrameType.HEARTBEAT, _F64.pack(_finite(msg.sent_at, "Heartbeat.sent_at"))
     raise ProtocolError(
@@ -602,6 +662,15 @@ def _decode_payload(ftype: FrameType, payload: bytes) -> StreamMessage:
         (reply_seq,) = r.unpack(_U32S)
         assert isinstance(reply_seq, int)
         msg = ReplyAck(reply_seq)
+    elif ftype is FrameType.MAKE_SAFE:
+        request_id, asked_at = r.unpack(_MAKE_SAFE_HEAD)
+        assert isinstance(request_id, int)
+        reason = r.text(MAX_DETAIL_BYTES, "reason", empty=True)
+        msg = MakeSafe(request_id, _finite_field(asked_at, "sent_at"), reason)
+    elif ftype is FrameType.MAKE_SAFE_ACK:
+        request_id, safe_at, first = r.unpack(_MAKE_SAFE_ACK)
+        assert isinstance(request_id, int)
+        msg = MakeSafeAck(request_id, _finite_field(safe_at, "vehicle_time"), _flag(first))
     else:  # FrameType.HEARTBEAT; the caller has checked the type
         msg = Heartbeat(r.f64("sent_at"))
     r.end()
@@ -654,12 +723,14 @@ def frame_size(msg: StreamMessage) -> int:
 # --- the stream codec --------------------------------------------------------------------
 
 _SENDS: Final = {
-    Role.CONTROLLER: (Command, ReplyAck, Heartbeat),
-    Role.VEHICLE: (Reply, Heartbeat),
+    Role.CONTROLLER: (Command, ReplyAck, MakeSafe, Heartbeat),
+    Role.VEHICLE: (Reply, MakeSafeAck, Heartbeat),
 }
 _RECEIVES: Final = {
-    Role.CONTROLLER: frozenset({FrameType.REPLY, FrameType.HEARTBEAT}),
-    Role.VEHICLE: frozenset({FrameType.COMMAND, FrameType.REPLY_ACK, FrameType.HEARTBEAT}),
+    Role.CONTROLLER: frozenset({FrameType.REPLY, FrameType.MAKE_SAFE_ACK, FrameType.HEARTBEAT}),
+    Role.VEHICLE: frozenset(
+        {FrameType.COMMAND, FrameType.REPLY_ACK, FrameType.MAKE_SAFE, FrameType.HEARTBEAT}
+    ),
 }
 
 

@@ -20,17 +20,19 @@ the vehicle is ours), and the timeline plots are drawn from the two logs.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import random
 import secrets
-from collections.abc import Callable, Mapping, Sequence
+import signal
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from runtime.controller import Controller, ControllerOptions, RunResult
 from runtime.engine import Engine, Policy
-from runtime.eventlog import EventLog, EventLogError
+from runtime.eventlog import EventLog, EventLogError, log_key
 from runtime.faultplan import FaultPlan
 from runtime.gate import ApprovedMission
 from runtime.link import Link, LinkEmulator, LinkProfile, MemoryLink, SocketLink
@@ -40,7 +42,7 @@ from runtime.vehicle.model import VehicleModel
 if TYPE_CHECKING:
     from coral_lang.net import Net
 
-__all__ = ["RunConfig", "controller_log_path", "resume_mission", "run_mission"]
+__all__ = ["RunConfig", "controller_log_path", "open_for_resume", "resume_mission", "run_mission"]
 
 CONTROLLER_LOG = "controller.sqlite"
 VEHICLE_LOG = "vehicle.sqlite"
@@ -71,6 +73,13 @@ class RunConfig:
             vehicle, else the generic one).
         sim_config: that simulator's settings file, if any.
         faults: replies to force (``runtime.faultplan``), simulated vehicles only.
+        telemetry_host: with ``vehicle``, the local address the telemetry socket binds to
+            and the control connection leaves from; None: the one the routes pick to
+            reach the vehicle (``runtime.socketlink``).
+        log_key_ephemeral: ``psk`` is a fresh random key that dies with this process (a
+            simulated run without ``--key-file``): the logs are written unauthenticated,
+            since nobody could ever verify them, and such a run may resume an
+            unauthenticated log (with a warning), against a simulated vehicle only.
     """
 
     out_dir: Path
@@ -87,6 +96,13 @@ class RunConfig:
     simulator: str | None = None
     sim_config: Path | None = None
     faults: FaultPlan | None = None
+    telemetry_host: str | None = None
+    log_key_ephemeral: bool = False
+
+
+def _log_key(config: RunConfig) -> bytes | None:
+    """The key the run's logs are authenticated with; None when nobody could check it."""
+    return None if config.log_key_ephemeral else log_key(config.psk)
 
 
 def _meta(mission: ApprovedMission, config: RunConfig) -> dict[str, object]:
@@ -97,7 +113,9 @@ def _meta(mission: ApprovedMission, config: RunConfig) -> dict[str, object]:
         "seed": config.seed,
         "vehicle": "sim" if config.vehicle is None else f"{config.vehicle[0]}:{config.vehicle[1]}",
         "realtime": config.realtime or config.vehicle is not None,
+        "speed": config.speed,
         "profiles": [str(Path(p.file).resolve()) for p in mission.mission.profiles if p.file],
+        "include_path": [str(Path(p).resolve()) for p in mission.mission.include_path],
         "faults": None if config.faults is None else str(config.faults),
     }
 
@@ -143,6 +161,7 @@ def run_mission(mission: ApprovedMission, config: RunConfig) -> RunResult:
         meta=_meta(mission, config),
         net_json=_net_json(mission),
         net_digest=mission.net.digest(),
+        mac_key=_log_key(config),
     )
     try:
         engine = Engine(mission.net, mission.approval, policy=config.policy, seed=config.seed)
@@ -168,15 +187,19 @@ def run_mission(mission: ApprovedMission, config: RunConfig) -> RunResult:
 def resume_mission(mission: ApprovedMission, log_path: Path, config: RunConfig) -> RunResult:
     """Continue the mission logged in ``log_path`` after the controller died.
 
+    The whole log is verified against the run's key first (`open_for_resume`), so a log
+    edited by hand is refused before anything is built, connected or written.
+
     Raises:
-        runtime.eventlog.EventLogError: the log cannot be opened for writing, is the log
-            of another net, or holds no usable committed state (each a `CoralError`, so
-            ``coral-run`` reports it as bad input, naming the log).
+        runtime.eventlog.EventLogError: the log cannot be opened for writing, does not
+            verify (edited, written with another key, or unauthenticated while the run has
+            a real key), is the log of another net, or holds no usable committed state
+            (each a `CoralError`, so ``coral-run`` reports it as bad input, naming the log).
         runtime.engine.EngineError: the log's state does not belong to this net.
     """
-    model = _simulated_vehicle(mission, config)
-    log = EventLog.open(log_path, writable=True)
+    log = open_for_resume(log_path, config)
     try:
+        model = _simulated_vehicle(mission, config)
         if log.net_digest is not None and log.net_digest != mission.net.digest():
             raise EventLogError(
                 f"{log_path} is the log of net {log.net_digest}, but {mission.path} "
@@ -208,6 +231,41 @@ def resume_mission(mission: ApprovedMission, log_path: Path, config: RunConfig) 
         return _drive(config, make, rng, mission.net.name, model)
     finally:
         log.close()
+
+
+def open_for_resume(log_path: Path, config: RunConfig) -> EventLog:
+    """Open the controller's log for a resume, verified under the run's key.
+
+    A run with a real key (``--key-file``, ``--key-hex``, and always with ``--vehicle``)
+    resumes only a log that verifies under it: not edited, not of another key, and
+    authenticated at all (a version 1 log, or one written without a key, could have been
+    edited undetectably). A simulated run whose key is ephemeral cannot verify anything;
+    it resumes only an unauthenticated log, and says so.
+
+    Raises:
+        runtime.eventlog.EventLogError: the log does not verify, or cannot be resumed
+            by this run; the message names the log and what is wrong.
+    """
+    key = _log_key(config)
+    if key is not None:
+        return EventLog.open(log_path, writable=True, mac_key=key)
+    with EventLog.open(log_path) as probe:
+        authenticated = probe.authenticated
+    if authenticated:
+        raise EventLogError(
+            f"{log_path}: the log is authenticated with its run's key; resume it with that "
+            "key (--key-file FILE)"
+        )
+    if config.vehicle is not None:  # a real vehicle never runs on an ephemeral key
+        raise EventLogError(
+            f"{log_path}: the log is not authenticated; a real vehicle is resumed only "
+            "from a log that verifies under its key"
+        )
+    config.console(
+        f"coral-run: warning: {log_path} is not authenticated (no MAC chain): edits to it "
+        "cannot be detected; resuming it only because the vehicle is simulated"
+    )
+    return EventLog.open(log_path, writable=True)
 
 
 def _check_resumable(log: EventLog, log_path: Path) -> None:
@@ -301,11 +359,46 @@ def _emulator(config: RunConfig) -> LinkEmulator | None:
     return None if config.link is None else LinkEmulator(config.link, seed=config.seed)
 
 
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+"""Signals that stop a run cleanly (`Controller.request_stop`) while the controller runs."""
+
+
+@contextlib.contextmanager
+def _stop_signals(controller: Controller) -> Iterator[None]:
+    """While the controller runs, SIGINT and SIGTERM stop it cleanly instead of killing it.
+
+    Installed on the running loop (real time, or virtual time: the virtual loop polls
+    its wakeup pipe on every iteration), so the handler runs between two steps of the
+    controller and never inside one. The handlers in place before are put back after,
+    so ``coral-run``'s own handling covers the plots and the exit. Outside the main
+    thread (no signals there) nothing is installed.
+    """
+    loop = asyncio.get_running_loop()
+    installed: list[tuple[signal.Signals, signal._HANDLER]] = []
+    for sig in STOP_SIGNALS:
+        previous = signal.getsignal(sig)
+        try:
+            loop.add_signal_handler(sig, controller.request_stop, sig.name)
+        except (NotImplementedError, RuntimeError, ValueError):
+            continue
+        installed.append((sig, previous))
+    try:
+        yield
+    finally:
+        for sig, previous in installed:
+            loop.remove_signal_handler(sig)
+            if previous is not None:  # None: a handler not set from Python; leave it
+                signal.signal(sig, previous)
+
+
 async def _remote(config: RunConfig, make: MakeController, host: str, port: int) -> RunResult:
-    link = SocketLink(host, port, _emulator(config), log=config.console)
+    link = SocketLink(
+        host, port, _emulator(config), log=config.console, telemetry_host=config.telemetry_host
+    )
     try:
         controller = make(link, asyncio.get_running_loop().time(), os.urandom)
-        return await controller.run()
+        with _stop_signals(controller):
+            return await controller.run()
     finally:
         await link.aclose()
 
@@ -328,7 +421,9 @@ async def _simulated(
         config.out_dir / VEHICLE_LOG,
         role="vehicle",
         mission=mission,
-        meta={"seed": config.seed, "speed": config.speed},
+        # In virtual time both ends share one clock, whatever --speed says.
+        meta={"seed": config.seed, "speed": config.speed if sockets else 1.0},
+        mac_key=_log_key(config),
     )
     server = VehicleServer(
         model,
@@ -348,7 +443,8 @@ async def _simulated(
             link = MemoryLink(server, _emulator(config), log=config.console)
         try:
             controller = make(link, loop.time(), controller_rng.randbytes)
-            return await controller.run()
+            with _stop_signals(controller):
+                return await controller.run()
         finally:
             await link.aclose()
     finally:

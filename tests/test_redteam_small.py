@@ -135,7 +135,13 @@ def test_profile_version_accepts_a_positive_integer_or_no_version() -> None:
 
 
 def _resume_log(tmp_path: Path, digest: str) -> Path:
-    """A controller log of ``digest``'s net whose run stopped before its first checkpoint."""
+    """A controller log of ``digest``'s net whose run stopped before its first checkpoint.
+
+    Written without a key, as a simulated run without ``--key-file`` writes it, and
+    resumed the same way (`_resume` gives no key): such a log is not authenticated, so
+    the checks below the MAC chain are what refuses its edits. With a key, the chain
+    refuses them first (tests/runtime/test_logauth.py).
+    """
     path = tmp_path / "run" / "controller.sqlite"
     path.parent.mkdir()
     with EventLog.create(
@@ -330,3 +336,30 @@ def test_every_file_coral_reads_refuses_a_fifo(tmp_path: Path, reader: str) -> N
         else:
             read_certificate(fifo)
     assert "not a regular file" in str(exc.value)
+
+
+@pytest.mark.parametrize(
+    ("meta", "says"),
+    [
+        (
+            {"mission_path": "/nonexistent/mission.coral", "profiles": []},
+            "names the mission '/nonexistent/mission.coral', which is not a readable file",
+        ),
+        (
+            {"mission_path": str(POOL_MISSION), "profiles": ["p" * 5000], "include_path": [7]},
+            "no committed state to resume from",
+        ),
+    ],
+    ids=["missing-mission", "overlong-profile-path"],
+)
+def test_resume_reads_the_paths_a_log_records_as_data_not_promises(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], meta: dict[str, object], says: str
+) -> None:
+    """bench/redteam.py: an edited ``mission_path`` gave "file not found" without naming
+    the log; a 5,000-character profile path gave an OSError traceback."""
+    log = tmp_path / "run" / "controller.sqlite"
+    log.parent.mkdir()
+    with EventLog.create(log, role="controller", mission="pool", meta=meta):
+        pass
+    code, err = _resume(log, tmp_path, capsys)
+    assert code == 2 and says in err and str(log) in err and "Traceback" not in err

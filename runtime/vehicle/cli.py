@@ -4,26 +4,39 @@
 profile (the simulator made for it, else the generic one) to a controller, on localhost
 by default, until Ctrl-C or ``--duration``; it prints ``listening on HOST:PORT`` first.
 ``--fault``/``--faults`` force replies to rehearse failures (``docs/vehicles.md``).
-``coral-vehicle list`` prints the registered simulators.
+``--log FILE`` writes the vehicle's event log (`VehicleLogFile`; ``romeo-sim serve`` uses
+it too). ``coral-vehicle list`` prints the registered simulators.
 
 Exit codes: 0 after a clean stop; 1 the address cannot be bound; 2 bad usage or input
-(a profile, key, fault plan or simulator that cannot be used).
+(a profile, key, fault plan or simulator that cannot be used, or a ``--log`` file that
+already exists).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from coral_lang.diagnostics import CoralError
 from coral_lang.profile import VehicleProfile, load_bundled_profile, load_profile
 from runtime.vehicle.model import VehicleModel
 from runtime.vehicle.options import add_simulation_arguments, fault_plan_from_args
 
-__all__ = ["build_parser", "main"]
+if TYPE_CHECKING:
+    from runtime.eventlog import EventLog
+
+__all__ = ["LOG_HELP", "VehicleLogFile", "build_parser", "main"]
+
+LOG_HELP = (
+    "write the vehicle's event log (SQLite) to this new file, created when the first "
+    "controller is adopted; its mission is the wire mission id in decimal"
+)
+"""The help of ``--log``, the same on ``coral-vehicle serve`` and ``romeo-sim serve``."""
 
 EXIT_OK = 0
 EXIT_BIND = 1
@@ -39,6 +52,64 @@ def _finite(text: str, *, positive: bool) -> float:
         kind = "positive" if positive else "non-negative"
         raise argparse.ArgumentTypeError(f"expected a {kind} number, got {text!r}")
     return value
+
+
+class VehicleLogFile:
+    """A served vehicle's event log: checked at start, created at the first adoption.
+
+    Why not at start: the log's header names its mission, and a served vehicle learns the
+    mission only from the controller's first ``Hello``. The header ``mission`` is that
+    wire mission id in decimal (``meta`` records it too, as ``mission_id``), which the
+    controller's log also records, so ``coral-run timeline`` can pair the two. A later
+    mission served by the same process goes on in the same log (its ``adopt`` events name
+    its id). An existing file is refused at start: a log is never overwritten. With
+    ``mac_key`` (`runtime.eventlog.log_key` of the pre-shared key) the log is
+    authenticated as the controller's is (``docs/eventlog.md``).
+
+    Use: pass the instance as ``open_event_log`` to `runtime.vehicle.server.run_vehicle`
+    (it is called with the mission id) and `close` it after serving.
+    """
+
+    def __init__(
+        self, path: Path, meta: Mapping[str, object], *, mac_key: bytes | None = None
+    ) -> None:
+        """Check that ``path`` can be a new log.
+
+        Raises:
+            EventLogError: ``path`` exists (or is a dangling link) or its folder does not.
+        """
+        from runtime.eventlog import EventLogError
+
+        if os.path.lexists(path):
+            raise EventLogError(
+                f"{path}: already exists; a vehicle log is never overwritten: give --log a "
+                "new file (or move this one away)"
+            )
+        if not path.absolute().parent.is_dir():
+            raise EventLogError(f"{path}: no such folder for the vehicle log")
+        self.path = path
+        self._meta = dict(meta)
+        self._mac_key = mac_key
+        self.log: EventLog | None = None
+
+    def __call__(self, mission_id: int) -> EventLog:
+        """Create the log for mission ``mission_id`` (once)."""
+        from runtime.eventlog import EventLog
+
+        if self.log is None:
+            self.log = EventLog.create(
+                self.path,
+                role="vehicle",
+                mission=str(mission_id),
+                meta={**self._meta, "mission_id": mission_id},
+                mac_key=self._mac_key,
+            )
+        return self.log
+
+    def close(self) -> None:
+        """Close the log if it was created (commits what is left)."""
+        if self.log is not None:
+            self.log.close()
 
 
 def _port(text: str) -> int:
@@ -71,7 +142,12 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--port", type=_port, default=0, help="TCP port; 0 picks one (default)")
     key = serve.add_mutually_exclusive_group()
     key.add_argument("--key-file", type=Path, metavar="FILE", help="pre-shared key, hex text")
-    key.add_argument("--key-hex", metavar="HEX", help="pre-shared key on the command line (tests)")
+    key.add_argument(
+        "--key-hex",
+        metavar="HEX",
+        help="pre-shared key on the command line; other users can see it in the process "
+        "list: prefer --key-file",
+    )
     serve.add_argument("--seed", type=int, default=0, help="seed of the simulated vehicle")
     serve.add_argument(
         "--speed",
@@ -87,9 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="SECONDS",
         help="stop after this many wall seconds (default: until Ctrl-C)",
     )
-    serve.add_argument(
-        "--log", type=Path, metavar="FILE", help="write the vehicle's event log (SQLite) here"
-    )
+    serve.add_argument("--log", type=Path, metavar="FILE", help=LOG_HELP)
     add_simulation_arguments(serve)
     return parser
 
@@ -132,7 +206,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _serve(
     args: argparse.Namespace, key: bytes, profile: VehicleProfile, model: VehicleModel
 ) -> int:
-    from runtime.eventlog import EventLog
+    from runtime.eventlog import log_key
     from runtime.vehicle.server import run_vehicle
 
     def log(line: str) -> None:
@@ -140,13 +214,14 @@ def _serve(
 
     event_log = None
     if args.log is not None:
+        meta = {
+            "seed": args.seed,
+            "speed": args.speed,
+            "profile": profile.file,
+            "vehicle": profile.name,
+        }
         try:
-            event_log = EventLog.create(
-                args.log,
-                role="vehicle",
-                mission=profile.name,
-                meta={"seed": args.seed, "speed": args.speed, "profile": profile.file},
-            )
+            event_log = VehicleLogFile(args.log, meta, mac_key=log_key(key))
         except CoralError as exc:
             log(str(exc))
             return EXIT_USAGE
@@ -159,7 +234,7 @@ def _serve(
             port=args.port,
             speed=args.speed,
             duration=args.duration,
-            event_log=event_log,
+            open_event_log=event_log,
             log=log,
         )
     finally:

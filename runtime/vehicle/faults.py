@@ -20,7 +20,8 @@ Forced replies that fall due later come out of `advance_to` merged in time order
 the wrapped vehicle's own replies (at equal times the vehicle's come first). Their
 detail names the rule: ``forced by fault plan rule 'DEPTH?=timeout'``. Everything else
 (the clock, the watchdog, telemetry) is the wrapped vehicle's; a forced command still
-counts as a word from the controller for its watchdog.
+counts as a word from the controller for its watchdog. A make-safe request goes to the
+wrapped vehicle.
 
 Random draws (rates, ``any``) come from a generator seeded by the injector's seed, the
 command's name and its use number, so whether the third DIVE is forced does not depend
@@ -143,6 +144,15 @@ class FaultInjector:
         """The wrapped vehicle's telemetry."""
         return self.inner.telemetry()
 
+    def make_safe(self, reason: str) -> list[Reply]:
+        """The wrapped vehicle makes itself safe; its replies, and the forced ones due now.
+
+        A forced command's reply still due later keeps its time, as under the watchdog:
+        the wrapped vehicle never heard of that command, so it has nothing to stop.
+        """
+        replies = self.inner.make_safe(reason)
+        return sorted([*replies, *self._due_by(self.inner.time)], key=lambda reply: reply.time)
+
     # -- commands -------------------------------------------------------------------------
 
     def command(self, command_id: int, name: str, params: Params) -> list[Reply]:
@@ -194,9 +204,13 @@ class FaultInjector:
         replies = self.inner.advance_to(t)
         if not self._pending or self._pending[0][0] > t:
             return replies
+        # sorted() is stable and the vehicle's replies come first: at equal times they
+        # keep their lead, and each list keeps its own order.
+        return sorted([*replies, *self._due_by(t)], key=lambda reply: reply.time)
+
+    def _due_by(self, t: float) -> list[Reply]:
+        """The forced replies due by ``t``, taken off the queue in time order."""
         due: list[Reply] = []
         while self._pending and self._pending[0][0] <= t:
             due.append(heapq.heappop(self._pending)[2])
-        # sorted() is stable and the vehicle's replies come first: at equal times they
-        # keep their lead, and each list keeps its own order.
-        return sorted([*replies, *due], key=lambda reply: reply.time)
+        return due

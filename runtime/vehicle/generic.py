@@ -22,8 +22,8 @@ replies.
 Telemetry is a plausible pose, not physics: the vehicle moves at 1 m/s towards the last
 ``x``/``y`` (or ``x1``/``y1``, the end of a line) given to a task, at 0.3 m/s towards the
 last ``z`` given to a task (0 after a task whose name contains ``SURFACE``, or after the
-watchdog), and heads along its horizontal motion unless a task gave a ``psi``. It has no
-navigation filter: ``x_est``/``y_est`` are None.
+watchdog or the controller's make-safe request), and heads along its horizontal motion
+unless a task gave a ``psi``. It has no navigation filter: ``x_est``/``y_est`` are None.
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ class GenericVehicle(HandlerVehicle):
             profile,
             watchdog_s=watchdog_s,
             poll_s=poll_s,
-            on_watchdog=self._make_safe,
+            on_watchdog=self._head_for_surface,
             telemetry=self._pose,
             start_time=start_time,
         )
@@ -134,7 +134,7 @@ class GenericVehicle(HandlerVehicle):
     def _drop(self, job: Job) -> None:
         self._due.pop(job.command_id, None)
 
-    def _make_safe(self) -> None:
+    def _head_for_surface(self) -> None:
         self._move_to(self.time)
         self._target_z = 0.0
         self._target_xy = None

@@ -26,7 +26,9 @@ it. What the library does, so that every vehicle behaves as ``docs/vehicles.md``
 * **The watchdog.** After ``watchdog_s`` vehicle seconds without `heard_from_controller`
   or a command (armed by the first of them), every task is stopped, every pending query
   replies ``timeout`` and every running action ``error``, and ``on_watchdog`` runs: the
-  integrator's make-safe (surface, drop a weight).
+  integrator's make-safe (surface, drop a weight). The controller's make-safe request
+  (`HandlerVehicle.make_safe`, when the operator stops ``coral-run``) does the same at
+  once.
 * **Replies.** Every kind a handler gives is checked against the profile (``error`` is
   always allowed: it is the protocol's refusal); anything else becomes ``error`` with a
   detail naming the kind. A handler that raises `Refused` gets ``error`` with its reason;
@@ -227,8 +229,8 @@ class HandlerVehicle:
         watchdog_s: vehicle seconds without a word from the controller before the
             vehicle makes itself safe.
         poll_s: vehicle seconds between two polls of a running query or action.
-        on_watchdog: the make-safe, called once each time the watchdog trips (after every
-            command was stopped).
+        on_watchdog: the make-safe, called once each time the watchdog trips or the
+            controller asks for it (`make_safe`), after every command was stopped.
         telemetry: given the vehicle time, the state to send as telemetry; None (or a
             source returning None) sends none.
         start_time: the vehicle clock at construction, s.
@@ -347,6 +349,22 @@ class HandlerVehicle:
         self._armed = True
         self._last_heard = self._clock
         self._tripped = False
+
+    def make_safe(self, reason: str) -> list[Reply]:
+        """The controller's make-safe request: what the watchdog does, at once.
+
+        Every command stops (its ``stop`` handler runs), pending queries reply
+        ``timeout``, running actions ``error``, and ``on_watchdog`` runs: the integrator's
+        one make-safe serves both the silence and the request. The watchdog then stays
+        tripped until the controller speaks again, so it does not make the vehicle safe a
+        second time. Returns every reply due now, those included.
+        """
+        self._tripped = True
+        self._note(f"make-safe requested by the controller ({reason or 'no reason given'})")
+        self._make_safe_now("stopped: the controller asked the vehicle to make itself safe")
+        out = self._outbox
+        self._outbox = []
+        return out
 
     def telemetry(self) -> TelemetrySnapshot | None:
         """The telemetry source's state at the vehicle time, or None.
@@ -583,7 +601,10 @@ class HandlerVehicle:
         self._tripped = True
         silence = self._clock - self._last_heard
         self._note(f"watchdog: no word from the controller for {silence:.1f} s; making safe")
-        why = "stopped by the watchdog"
+        self._make_safe_now("stopped by the watchdog")
+
+    def _make_safe_now(self, why: str) -> None:
+        """Stop every command with the watchdog's replies, then the integrator's make-safe."""
         for run in list(self._running):
             self._finish(run)
             self._call_stop(run)

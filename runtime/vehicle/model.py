@@ -93,6 +93,7 @@ class VehicleModel(Protocol):
       ``t``, in time order, each stamped with its own vehicle time.
     * A model never raises for bad input from the wire (an unknown command, a missing or
       out-of-range parameter): it replies ``error`` with a detail.
+    * `make_safe` does at once what the watchdog does after ``watchdog_s`` of silence.
     """
 
     @property
@@ -116,6 +117,19 @@ class VehicleModel(Protocol):
 
     def heard_from_controller(self) -> None:
         """The controller is alive: reset the watchdog."""
+        ...
+
+    def make_safe(self, reason: str) -> list[Reply]:
+        """The controller asks the vehicle to make itself safe now (``MakeSafe`` frame).
+
+        The effect is the watchdog's, at once: every task stops, every pending query
+        replies ``timeout`` and every running action ``error``, and the vehicle does
+        what its watchdog does to be safe (surface, stop the thrusters). Returns the
+        replies due now, those included, like `command`; the server numbers them in
+        the mission's ledger, so a resumed controller consumes them and the mission
+        takes its error paths. Calling it again with nothing running is harmless.
+        ``reason`` is for the vehicle's own log.
+        """
         ...
 
     def telemetry(self) -> TelemetrySnapshot | None:

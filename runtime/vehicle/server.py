@@ -17,6 +17,8 @@ How it behaves:
 * Every command id runs once per mission (`ReplyLedger`); a repeat re-sends the replies
   still unacknowledged for it. Replies are kept until a `ReplyAck` (or a resuming
   ``Hello``'s ``last_reply_seq``) covers them, and re-sent after a resume.
+* A ``MakeSafe`` request makes the vehicle safe at once (`VehicleModel.make_safe`), once
+  per request id, and is acknowledged (``MakeSafeAck``) every time.
 * The vehicle's command ids are the server's own, numbered 1, 2, 3... across missions, so a
   new mission may reuse the wire ids of an old one without the vehicle mistaking them for
   repeats.
@@ -34,7 +36,13 @@ How it behaves:
   unadopted (a new one closes the oldest, preferring one that sent no ``Hello``), a
   pending connection sending more than ``max_pending_bytes`` is closed, and accept
   failures (out of descriptors) are counted, logged rate-limited and retried. The adopted
-  controller is never counted against these limits.
+  controller is never counted against these limits. At `start`, ``max_pending`` is
+  lowered to what the process's descriptor limit (soft ``RLIMIT_NOFILE``) leaves free
+  after `DESCRIPTOR_RESERVE` (a warning says so): pending connections then never take the
+  descriptor the controller's connection needs.
+* The event log is given at construction (``event_log``) or created when the first
+  controller is adopted (``open_event_log``): a served vehicle learns its mission only
+  from that ``Hello``, so its log is named after the wire mission id.
 * Without sockets (`start_detached` and `accept`), an in-memory link such as
   `runtime.memorylink.MemoryLink` hands the server its connections and receives the
   telemetry, so the same server runs under a virtual clock.
@@ -53,7 +61,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Generic
 
-from runtime.eventlog import EventLog, TelemetrySample
+from runtime.eventlog import EventLog, EventLogError, TelemetrySample
 from runtime.protocol import (
     MAX_DETAIL_BYTES,
     MAX_FRAME,
@@ -63,6 +71,8 @@ from runtime.protocol import (
     Heartbeat,
     Hello,
     HelloReply,
+    MakeSafe,
+    MakeSafeAck,
     ProtocolError,
     Rejected,
     ReplyAck,
@@ -96,8 +106,36 @@ DatagramSink = Callable[[bytes, tuple[str, int]], None]
 """Where an in-memory connection's telemetry goes: (datagram, (host, port))."""
 
 
+DESCRIPTOR_RESERVE = 12
+"""Descriptors `VehicleServer.start` keeps free beyond the pending connections: the
+controller's connection and a reconnecting one, the event log (SQLite: database, journal
+or WAL, shared memory), the resolver, and a margin."""
+
+
 def _stderr(line: str) -> None:
     print(f"vehicle server: {line}", file=sys.stderr, flush=True)
+
+
+def spare_descriptors() -> tuple[int, int] | None:
+    """(descriptors this process may still open, its soft limit); None if unknown.
+
+    Unknown: no ``resource`` module (Windows), no unlimited-or-finite soft limit to fit,
+    or no folder listing the open descriptors (``/proc/self/fd``, ``/dev/fd``).
+    """
+    try:
+        import resource
+    except ImportError:
+        return None
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft == resource.RLIM_INFINITY:
+        return None
+    for folder in ("/proc/self/fd", "/dev/fd"):
+        try:
+            in_use = len(os.listdir(folder))  # counts the listing's own descriptor: safe
+        except OSError:
+            continue
+        return max(0, soft - in_use), soft
+    return None
 
 
 @dataclass
@@ -264,6 +302,7 @@ class VehicleServer(Generic[M]):
             verifying frame may take three such stalls.
         max_pending: connections that may wait unadopted at once; a new one beyond closes
             the oldest (one that sent no ``Hello`` first). The controller is not counted.
+            `start` lowers it to fit the descriptor limit (`max_pending` tells the result).
         max_pending_bytes: bytes a pending connection may send without being adopted
             (at least `MAX_FRAME`); a handshake takes about a hundred.
         nonces: source of random bytes for the handshake nonces; ``os.urandom`` by default.
@@ -272,6 +311,9 @@ class VehicleServer(Generic[M]):
         event_log: the vehicle's side of the run's record (``docs/eventlog.md``): every
             command received, reply issued and telemetry sample, on the vehicle clock;
             committed about once a second and at `stop`. None: no record.
+        open_event_log: with no ``event_log``, called once with the wire mission id when
+            the first controller is adopted, to create the log then (the caller closes
+            it); a failure is logged and the vehicle goes on without a record.
 
     Raises:
         ValueError: a key shorter than `MIN_KEY_SIZE`, or a speed, rate or interval that is
@@ -299,6 +341,7 @@ class VehicleServer(Generic[M]):
         nonces: Callable[[int], bytes] = os.urandom,
         log: Callable[[str], None] = _stderr,
         event_log: EventLog | None = None,
+        open_event_log: Callable[[int], EventLog] | None = None,
     ) -> None:
         if not isinstance(psk, bytes | bytearray) or len(psk) < MIN_KEY_SIZE:
             raise ValueError(
@@ -336,6 +379,7 @@ class VehicleServer(Generic[M]):
         self._log = log
         self._throttled = _LogThrottle(log, clock)
         self._events = event_log
+        self._open_events = None if event_log is not None else open_event_log
         self._samples = 0
         self._last_commit = 0.0
         self.stats = ServerStats()
@@ -345,9 +389,13 @@ class VehicleServer(Generic[M]):
         self._connections: set[_Connection] = set()
         # Connections not adopted yet, oldest first (a dict keeps the order).
         self._pending: dict[_Connection, None] = {}
+        # Sockets accepted whose connection is not registered yet (counted as pending).
+        self._accepting = 0
         self._handlers: set[asyncio.Task[None]] = set()
         # Vehicle-side command id -> (the ledger it belongs to, the wire command id).
         self._origin: dict[int, tuple[ReplyLedger, int]] = {}
+        # Make-safe request ids carried out for the current mission (a repeat is acked only).
+        self._made_safe: set[int] = set()
         self._next_vehicle_id = 1
         self._listener: socket.socket | None = None
         self._acceptor: asyncio.Task[None] | None = None
@@ -363,6 +411,16 @@ class VehicleServer(Generic[M]):
     def address(self) -> tuple[str, int] | None:
         """The bound TCP (host, port) once started, else None."""
         return self._address
+
+    @property
+    def max_pending(self) -> int:
+        """Connections that may wait unadopted (after `start`, fitted to the descriptors)."""
+        return self._max_pending
+
+    @property
+    def event_log(self) -> EventLog | None:
+        """The vehicle's event log: given, or created at the first adoption; else None."""
+        return self._events
 
     @property
     def silence_timeout(self) -> float:
@@ -412,9 +470,40 @@ class VehicleServer(Generic[M]):
             listener.close()
             raise
         self._udp = udp
+        self._fit_to_descriptors()
         self._acceptor = asyncio.create_task(self._accept_loop(listener), name="vehicle accept")
         self._start_stepping()
         return self._address
+
+    def _fit_to_descriptors(self) -> None:
+        """Lower ``max_pending`` to what the descriptor limit leaves free; warn once.
+
+        Why: each pending connection holds a descriptor. Under a flood, pending connections
+        up to a cap above the limit would make every accept fail (EMFILE) until one is
+        evicted; fitted, the controller's connection always finds a descriptor. Measured
+        after the sockets are open, so they are counted.
+        """
+        spare = spare_descriptors()
+        if spare is None:
+            return
+        free, soft = spare
+        cap = max(1, free - DESCRIPTOR_RESERVE)
+        if cap < self._max_pending:
+            self._log(
+                f"at most {cap} pending connections, not {self._max_pending}: the descriptor "
+                f"limit ({soft}, ulimit -n) leaves {free} free; raise it for more"
+            )
+            self._max_pending = cap
+
+    def _open_record(self, mission_id: int) -> None:
+        """Create the event log (``open_event_log``) at the first adoption, once."""
+        opener, self._open_events = self._open_events, None
+        if opener is None or self._events is not None:
+            return
+        try:
+            self._events = opener(mission_id)
+        except (EventLogError, OSError) as exc:
+            self._log(f"no event log: {exc}")
 
     async def _accept_loop(self, listener: socket.socket) -> None:
         loop = asyncio.get_running_loop()
@@ -428,9 +517,28 @@ class VehicleServer(Generic[M]):
                     self._evict("to free a descriptor")
                 await asyncio.sleep(self.accept_retry_delay)
                 continue
+            await self._make_room()
+            self._accepting += 1
             task = asyncio.create_task(self._on_socket(sock, peer), name=f"vehicle conn {peer}")
             self._handlers.add(task)
             task.add_done_callback(self._handlers.discard)
+            # An accept that finds a connection waiting does not yield: without this, a
+            # flood is accepted in one burst, before any eviction has released its socket.
+            await asyncio.sleep(0)
+
+    async def _make_room(self) -> None:
+        """Keep pending connections, the one just accepted included, within ``max_pending``.
+
+        Evicting here, before the next accept, rather than when the connection registers,
+        bounds the descriptors a flood holds at any moment (``max_pending`` plus the one
+        just accepted): with ``max_pending`` fitted to the descriptor limit, no accept
+        fails for lack of one.
+        """
+        while len(self._pending) + self._accepting >= self._max_pending:
+            if self._pending:
+                self._evict(f"to make room (at most {self._max_pending} pending)")
+            else:  # accepted ones still registering: let them
+                await asyncio.sleep(0)
 
     async def _on_socket(self, sock: socket.socket, peer: object) -> None:
         try:
@@ -439,6 +547,8 @@ class VehicleServer(Generic[M]):
             sock.close()
             self._throttled("accept errors", f"connection {peer}: {exc}")
             return
+        finally:
+            self._accepting -= 1  # registered at once below, with no await in between
         await self._serve_connection(reader, writer, peer, None)
 
     async def start_detached(self) -> None:
@@ -763,6 +873,7 @@ class VehicleServer(Generic[M]):
         self._active = conn
         conn.adopted = True
         self.stats.adopted += 1
+        self._open_record(hello.mission_id)
         self._record(
             "adopt", peer=conn.peer, mission_id=hello.mission_id, resumed=conn.announced_resume
         )
@@ -781,6 +892,7 @@ class VehicleServer(Generic[M]):
         else:
             self.ledger = ReplyLedger(hello.mission_id)
             self._origin.clear()
+            self._made_safe.clear()
             what = "could not resume" if hello.resume else "starts"
             self._log(f"controller {conn.peer} {what} mission {hello.mission_id}")
 
@@ -792,7 +904,29 @@ class VehicleServer(Generic[M]):
             self._on_command(conn, msg)
         elif isinstance(msg, ReplyAck):
             self.ledger.acknowledge(msg.reply_seq)
+        elif isinstance(msg, MakeSafe):
+            self._on_make_safe(conn, msg)
         # Heartbeat: hearing from the controller is all it does.
+
+    def _on_make_safe(self, conn: _Connection, msg: MakeSafe) -> None:
+        """Make the vehicle safe once per request id; acknowledge every time.
+
+        Why once: the controller re-sends its request after a reconnect, and a repeat must
+        not stop the vehicle's recovery a second time. The replies the stopped commands
+        give go into the ledger before the acknowledgement, so they reach the controller
+        (now, or on resume) like any other reply.
+        """
+        first = msg.request_id not in self._made_safe
+        self._made_safe.add(msg.request_id)
+        self._record("make-safe", request_id=msg.request_id, reason=msg.reason, repeat=not first)
+        if first:
+            self._log(
+                f"controller {conn.peer} asked the vehicle to make itself safe "
+                f"({msg.reason or 'no reason given'}); stopping every command"
+            )
+            self._issue(self.vehicle.make_safe(msg.reason))
+            self._commit_record(force=True)
+        conn.send(MakeSafeAck(msg.request_id, self.vehicle.time, first), self._clock())
 
     def _on_command(self, conn: _Connection, cmd: Command) -> None:
         ledger = self.ledger
@@ -838,6 +972,7 @@ async def serve_vehicle(
     speed: float = 1.0,
     duration: float | None = None,
     event_log: EventLog | None = None,
+    open_event_log: Callable[[int], EventLog] | None = None,
     log: Callable[[str], None] = _stderr,
 ) -> ServerStats:
     """Serve ``model`` on ``host:port`` until cancelled or ``duration`` wall seconds pass.
@@ -862,6 +997,7 @@ async def serve_vehicle(
         speed=speed,
         log=log,
         event_log=event_log,
+        open_event_log=open_event_log,
     )
     try:
         bound_host, bound_port = await server.start()
@@ -889,6 +1025,7 @@ def run_vehicle(
     speed: float = 1.0,
     duration: float | None = None,
     event_log: EventLog | None = None,
+    open_event_log: Callable[[int], EventLog] | None = None,
     log: Callable[[str], None] = _stderr,
 ) -> int:
     """`serve_vehicle` from an integrator's ``main``: blocks until Ctrl-C or ``duration``.
@@ -907,6 +1044,7 @@ def run_vehicle(
                 speed=speed,
                 duration=duration,
                 event_log=event_log,
+                open_event_log=open_event_log,
                 log=log,
             )
         )

@@ -21,6 +21,7 @@ import pytest
 from romeo_sim.cli import main
 from romeo_sim.server import VehicleServer
 from romeo_sim.vehicle import Vehicle
+from runtime.eventlog import EventLog
 from runtime.protocol import (
     Command,
     DatagramReceiver,
@@ -352,6 +353,7 @@ def test_cli_serves_for_the_given_duration(
 ) -> None:
     key = tmp_path / "psk.hex"
     key.write_text(PSK.hex() + "\n")
+    key.chmod(0o600)  # a key file others can read is refused
     args = ["serve", "--key-file", str(key), "--speed", "20", "--duration", "0.2"]
     assert main(args) == 0
     captured = capsys.readouterr()
@@ -398,3 +400,83 @@ def test_a_detached_server_opens_no_socket_and_serves_handed_connections() -> No
     assert {address for _, address in sent} == {("handed", 4321)}
     assert server.stats.datagrams == len(sent) and server.stats.commands == 1
     assert any("connection from handed:1" in line for line in log), log
+
+
+def test_the_event_log_is_created_at_the_first_adoption_named_by_the_mission_id(
+    tmp_path: Path,
+) -> None:
+    """A served vehicle learns its mission from the first Hello: `open_event_log` is called
+    then, once, with the wire mission id; a later mission goes on in the same log."""
+    log: list[str] = []
+    opened: list[int] = []
+
+    def open_log(mission_id: int) -> EventLog:
+        opened.append(mission_id)
+        return EventLog.create(
+            tmp_path / "vehicle.sqlite", role="vehicle", mission=str(mission_id), meta={}
+        )
+
+    async def scenario() -> VehicleServer:
+        server = VehicleServer(
+            Vehicle(seed=0),
+            PSK,
+            speed=50.0,
+            tick=0.01,
+            nonces=random.Random(0).randbytes,
+            log=log.append,
+            open_event_log=open_log,
+        )
+        async with server:
+            assert server.address is not None and server.event_log is None
+            await asyncio.sleep(0.1)  # telemetry before any controller: nowhere to go
+            for mission_id in (41, 42):
+                ctl = await Controller.connect(
+                    server.address[1], nonce=bytes([mission_id]) * 16, mission_id=mission_id
+                )
+                await ctl.command(1, "DEPTH", z=1.0)
+                await ctl.reply(1, "ack")
+                await ctl.close()
+        return server
+
+    server = asyncio.run(within(scenario(), 10.0))
+    assert opened == [41]
+    assert server.event_log is not None
+    server.event_log.close()
+    with EventLog.open(tmp_path / "vehicle.sqlite") as vehicle_log:
+        assert vehicle_log.mission == "41" and vehicle_log.role == "vehicle"
+        adopted = [e.data["mission_id"] for e in vehicle_log.events(["adopt"])]
+        commands = list(vehicle_log.events(["command-received"]))
+    assert adopted == [41, 42] and len(commands) == 2
+
+
+def test_a_log_that_cannot_be_created_is_reported_and_the_vehicle_goes_on(
+    tmp_path: Path,
+) -> None:
+    existing = tmp_path / "vehicle.sqlite"
+    existing.write_bytes(b"evidence")
+    log: list[str] = []
+
+    async def scenario() -> VehicleServer:
+        server = VehicleServer(
+            Vehicle(seed=0),
+            PSK,
+            speed=50.0,
+            tick=0.01,
+            nonces=random.Random(0).randbytes,
+            log=log.append,
+            open_event_log=lambda mission_id: EventLog.create(
+                existing, role="vehicle", mission=str(mission_id), meta={}
+            ),
+        )
+        async with server:
+            assert server.address is not None
+            ctl = await Controller.connect(server.address[1], nonce=b"e" * 16)
+            await ctl.command(1, "DEPTH", z=1.0)
+            await ctl.reply(1, "ack")
+            await ctl.close()
+        return server
+
+    server = asyncio.run(within(scenario(), 10.0))
+    assert server.event_log is None and server.stats.commands == 1
+    assert existing.read_bytes() == b"evidence"
+    assert any(line.startswith("no event log:") and "already exists" in line for line in log), log

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -20,6 +22,8 @@ from coral_lang.profile import VehicleProfile, bundled_profile_path, load_bundle
 from tests.conftest import EXAMPLES, session_signing_key
 
 POOL_MISSION = EXAMPLES / "pool_mission" / "pool_mission.coral"
+BIN = Path(sys.executable).parent
+"""Where this environment's ``coral-run``, ``coral-vehicle`` and ``romeo-sim`` are."""
 
 
 def compile_text(text: str) -> Net:
@@ -72,3 +76,28 @@ def kill_9_at(argv: list[str], line: str, *, settle: float, timeout: float = 120
     process.send_signal(signal.SIGKILL)
     process.wait()
     return seen
+
+
+def write_psk(directory: Path) -> Path:
+    """A fresh pre-shared key file in ``directory``, mode 0600 (others may not read it)."""
+    key = directory / "psk.hex"
+    key.write_text(os.urandom(32).hex())
+    key.chmod(0o600)
+    return key
+
+
+def start_server(argv: list[str], listening: str = r"\S+:\d+") -> tuple[subprocess.Popen[str], str]:
+    """Start a vehicle server (``coral-vehicle serve``, ``romeo-sim serve``) and wait for
+    its ``listening on HOST:PORT`` line; the process and the address it names.
+
+    The first stdout line must match ``listening on (listening)``, else the server is
+    killed and the test fails with what it printed.
+    """
+    server = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert server.stdout is not None
+    line = server.stdout.readline()
+    match = re.match(rf"listening on ({listening})", line)
+    if not match:
+        server.kill()
+        raise AssertionError(f"{argv[0]} did not start: {line!r} {server.communicate()[1]}")
+    return server, match.group(1)

@@ -9,11 +9,9 @@ nothing, as against ROMEO.
 
 from __future__ import annotations
 
-import os
 import re
 import signal
 import subprocess
-import sys
 from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
@@ -22,9 +20,8 @@ import pytest
 
 from runtime.eventlog import EventLog
 from tests.conftest import EXAMPLES
-from tests.runtime.helpers import kill_9_at, sign_file
+from tests.runtime.helpers import BIN, kill_9_at, sign_file, start_server, write_psk
 
-BIN = Path(sys.executable).parent
 SURVEY = EXAMPLES / "survey_auv" / "survey.coral"
 MINNOW = EXAMPLES / "profiles" / "minnow.yaml"
 SPEED = 100.0
@@ -36,7 +33,7 @@ def _serve(tmp: Path, key: Path, *extra: str) -> tuple[subprocess.Popen[str], st
     # A long watchdog (100 wall seconds at this speed) outlasts a controller's restart;
     # a small spread keeps each survey line inside its time-out.
     settings.write_text("watchdog_s: 10000\nvariation: 0.1\n")
-    vehicle = subprocess.Popen(
+    return start_server(
         [
             str(BIN / "coral-vehicle"),
             "serve",
@@ -52,17 +49,8 @@ def _serve(tmp: Path, key: Path, *extra: str) -> tuple[subprocess.Popen[str], st
             str(tmp / "vehicle.sqlite"),
             *extra,
         ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+        listening=r"127\.0\.0\.1:\d+",
     )
-    assert vehicle.stdout is not None
-    line = vehicle.stdout.readline()
-    match = re.match(r"listening on (127\.0\.0\.1:\d+)", line)
-    if not match:
-        vehicle.kill()
-        pytest.fail(f"coral-vehicle did not start: {line!r} {vehicle.communicate()[1]}")
-    return vehicle, match.group(1)
 
 
 def _stop(vehicle: subprocess.Popen[str]) -> str:
@@ -73,9 +61,7 @@ def _stop(vehicle: subprocess.Popen[str]) -> str:
 
 @pytest.fixture
 def key(tmp_path: Path) -> Path:
-    path = tmp_path / "psk.hex"
-    path.write_text(os.urandom(32).hex())
-    return path
+    return write_psk(tmp_path)  # mode 0600: a key file others can read is refused
 
 
 @pytest.fixture

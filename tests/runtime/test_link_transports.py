@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import random
+import socket
 import time
 from collections.abc import Awaitable
 from dataclasses import dataclass, replace
@@ -20,6 +21,7 @@ import pytest
 
 from romeo_sim.server import VehicleServer
 from romeo_sim.vehicle import Vehicle
+from runtime import socketlink
 from runtime.link import (
     BUILTIN_PROFILES,
     Connection,
@@ -46,6 +48,7 @@ from runtime.protocol import (
     StreamMessage,
     Telemetry,
 )
+from runtime.socketlink import local_address_towards
 from runtime.vclock import run_virtual
 
 PSK = bytes(range(32))
@@ -352,11 +355,18 @@ async def within(awaitable: Awaitable[T], seconds: float = 3.0) -> T:
 
 async def _socket_mission(
     profile: LinkProfile | None,
+    *,
+    vehicle_host: str = "127.0.0.1",
+    telemetry_host: str | None = None,
+    peers: list[str] | None = None,
 ) -> tuple[list[Reply], list[Telemetry], LinkStats]:
+    """INIT and DEPTH over a SocketLink to a real server, then telemetry; ``peers``
+    receives the address the vehicle saw its controller at."""
     loop = asyncio.get_running_loop()
     server = VehicleServer(
         Vehicle(seed=0),
         PSK,
+        host=vehicle_host,
         speed=50.0,
         tick=0.01,
         nonces=random.Random(0).randbytes,
@@ -364,7 +374,7 @@ async def _socket_mission(
     )
     host, port = await server.start()
     emulator = None if profile is None else LinkEmulator(profile, 6)
-    link = SocketLink(host, port, emulator)
+    link = SocketLink(host, port, emulator, telemetry_host=telemetry_host)
     try:
         datagrams: list[bytes] = []
         udp_port = await link.open_telemetry(datagrams.append)
@@ -378,6 +388,8 @@ async def _socket_mission(
         while len(_telemetry(ctl.codec.session_key, datagrams)) < 8 and loop.time() < started + 2:
             await asyncio.sleep(0.02)
         samples = _telemetry(ctl.codec.session_key, datagrams)
+        if peers is not None and server.controller is not None:
+            peers.append(server.controller)
         await ctl.close()
         return replies, samples, link.stats
     finally:
@@ -441,3 +453,113 @@ def test_connecting_where_nobody_listens_is_a_connection_error() -> None:
         return link.stats
 
     assert asyncio.run(within(scenario())).connect_failures == 1
+
+
+# ---------------------------------------------------------------------- telemetry address
+
+
+def _can_bind(host: str) -> bool:
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.bind((host, 0))
+    except OSError:
+        return False
+    return True
+
+
+other_loopback = pytest.mark.skipif(
+    not (_can_bind("127.0.0.2") and _can_bind("127.0.0.3")),
+    reason="needs 127.0.0.2 and 127.0.0.3 on the loopback interface (Linux routes 127/8 there)",
+)
+
+
+@other_loopback
+@pytest.mark.parametrize(
+    ("telemetry_host", "seen_from"),
+    [(None, None), ("127.0.0.3", "127.0.0.3"), ("0.0.0.0", None)],
+    ids=["route", "given", "wildcard"],
+)
+def test_telemetry_arrives_from_a_vehicle_on_another_address(
+    telemetry_host: str | None, seen_from: str | None
+) -> None:
+    """The vehicle sends telemetry to the address its controller connects from: the link
+    binds its UDP socket there, and connects from the given address when told one."""
+    peers: list[str] = []
+    replies, samples, _ = asyncio.run(
+        within(
+            _socket_mission(
+                None, vehicle_host="127.0.0.2", telemetry_host=telemetry_host, peers=peers
+            ),
+            10.0,
+        )
+    )
+    assert [r.reply_seq for r in replies] == [1, 2]
+    assert len(samples) >= 8
+    (peer,) = peers
+    if seen_from is not None:
+        assert peer.startswith(f"{seen_from}:"), peer
+
+
+def _non_loopback_address() -> str | None:
+    """This machine's address towards the rest of the world, if it has one."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect(("198.51.100.1", 9))  # TEST-NET-2: a route lookup, nothing sent
+            address = str(probe.getsockname()[0])
+    except OSError:
+        return None
+    return None if address.startswith("127.") else address
+
+
+@pytest.mark.skipif(_non_loopback_address() is None, reason="no non-loopback address")
+def test_telemetry_arrives_from_a_vehicle_on_a_non_loopback_address() -> None:
+    """The reported bug: a socket bound to 127.0.0.1 never hears a vehicle that sees its
+    controller at the machine's network address. The default binds to that address."""
+    address = _non_loopback_address()
+    assert address is not None
+    peers: list[str] = []
+    _, samples, _ = asyncio.run(
+        within(_socket_mission(None, vehicle_host=address, peers=peers), 10.0)
+    )
+    assert len(samples) >= 8
+    assert peers and peers[0].startswith(f"{address}:")
+
+
+def test_the_route_address_is_the_source_of_a_connection_to_the_vehicle() -> None:
+    async def scenario() -> tuple[str, str]:
+        server = await asyncio.start_server(lambda r, w: w.close(), "127.0.0.1", 0)
+        port = server.sockets[0].getsockname()[1]
+        try:
+            chosen = await local_address_towards("127.0.0.1", port)
+            _, writer = await asyncio.open_connection("127.0.0.1", port)
+            source = writer.get_extra_info("sockname")[0]
+            writer.close()
+            return chosen, source
+        finally:
+            server.close()
+            await server.wait_closed()
+
+    chosen, source = asyncio.run(within(scenario()))
+    assert chosen == source == "127.0.0.1"
+
+
+def test_with_no_route_to_the_vehicle_telemetry_listens_on_every_address(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    async def no_route(host: str, port: int) -> str:
+        raise OSError(101, "Network is unreachable")
+
+    monkeypatch.setattr(socketlink, "local_address_towards", no_route)
+
+    async def scenario() -> tuple[str, list[str]]:
+        log: list[str] = []
+        link = SocketLink("10.99.0.1", 9, log=log.append)
+        await link.open_telemetry(lambda _: None)
+        assert link._udp is not None
+        bound = str(link._udp.get_extra_info("sockname")[0])
+        await link.aclose()
+        return bound, log
+
+    bound, log = asyncio.run(within(scenario()))
+    assert bound == "0.0.0.0"
+    assert log and "no route to 10.99.0.1" in log[0], log

@@ -23,6 +23,8 @@ from runtime.protocol import (
     Heartbeat,
     Hello,
     HelloReply,
+    MakeSafe,
+    MakeSafeAck,
     ParamValue,
     ProtocolError,
     Rejected,
@@ -100,10 +102,17 @@ replies = st.builds(
     detail=utf8_text(200),
 )
 heartbeats = st.builds(Heartbeat, sent_at=finite)
-controller_messages = st.lists(
-    st.one_of(commands, st.builds(ReplyAck, st.integers(0, U32)), heartbeats), max_size=6
+make_safes = st.builds(
+    MakeSafe, request_id=st.integers(0, U32), sent_at=finite, reason=utf8_text(200)
 )
-vehicle_messages = st.lists(st.one_of(replies, heartbeats), max_size=6)
+make_safe_acks = st.builds(
+    MakeSafeAck, request_id=st.integers(0, U32), vehicle_time=finite, first=st.booleans()
+)
+controller_messages = st.lists(
+    st.one_of(commands, st.builds(ReplyAck, st.integers(0, U32)), make_safes, heartbeats),
+    max_size=6,
+)
+vehicle_messages = st.lists(st.one_of(replies, make_safe_acks, heartbeats), max_size=6)
 nonces = st.binary(min_size=16, max_size=16)
 
 
@@ -336,6 +345,9 @@ def test_authentic_but_malformed_or_unknown_frames_are_rejected() -> None:
         Command(2**32, "DEPTH", 0.0),
         Command(1, "DEPTH", 0.0, {f"p{i}": 1.0 for i in range(17)}),
         ReplyAck(-1),
+        MakeSafe(2**32, 0.0, "SIGTERM"),
+        MakeSafe(1, math.nan, "SIGTERM"),
+        MakeSafe(1, 0.0, "r" * 201),
     ],
 )
 def test_misuse_raises_protocol_error(msg: StreamMessage) -> None:
@@ -388,6 +400,8 @@ SIZES = [
     ("Reply done", Reply(2, 1, "done", 0.0), 49),
     ("ReplyAck", ReplyAck(2), 31),
     ("Heartbeat", Heartbeat(0.0), 35),
+    ("MakeSafe SIGTERM", MakeSafe(1, 0.0, "SIGTERM"), 47),
+    ("MakeSafeAck", MakeSafeAck(1, 0.0, True), 40),
 ]
 
 
@@ -404,7 +418,7 @@ def test_documented_frame_sizes(label: str, msg: StreamMessage, size: int) -> No
         assert len(reply_frame) == size
         return
     ctl.feed(reply_frame)
-    sender = veh if isinstance(msg, Reply) else ctl
+    sender = veh if isinstance(msg, Reply | MakeSafeAck) else ctl
     assert len(sender.encode(msg)) == size == frame_size(msg)
 
 
@@ -791,6 +805,8 @@ def test_public_surface() -> None:
             "Heartbeat",
             "Hello",
             "HelloReply",
+            "MakeSafe",
+            "MakeSafeAck",
             "MAX_COUNTER",
             "MAX_DETAIL_BYTES",
             "MAX_FRAME",
@@ -855,3 +871,27 @@ def test_a_megabyte_of_garbage_buffers_nothing() -> None:
     assert reasons(out) == [RejectReason.BAD_MAGIC]
     assert veh.buffered <= 1
     assert veh.feed(ctl.encode(Heartbeat(1.0))) == [Heartbeat(1.0)]
+
+
+# --- make-safe ----------------------------------------------------------------------------
+
+
+def test_make_safe_is_only_taken_authenticated_once_and_in_its_direction() -> None:
+    ctl, veh = connect()
+    frame = ctl.encode(MakeSafe(7, 1.5, "SIGTERM"))
+    assert veh.feed(frame) == [MakeSafe(7, 1.5, "SIGTERM")]
+    # The same bytes again (a replay on this connection) are refused by the counter.
+    assert reasons(veh.feed(frame)) == [RejectReason.REPLAY]
+    # Under another key (an outsider, or a recorded frame of another connection): bad tag.
+    other_ctl, _ = connect(psk=bytes(reversed(PSK)))
+    forged = other_ctl.encode(MakeSafe(8, 2.0, "forged"))
+    assert reasons(veh.feed(forged)) == [RejectReason.BAD_TAG]
+    # Before the handshake a make-safe is no session frame at all.
+    fresh = StreamCodec(PSK, Role.VEHICLE, V_NONCE)
+    assert reasons(fresh.feed(frame)) == [RejectReason.NO_SESSION]
+    # Only the vehicle acknowledges, only the controller asks.
+    with pytest.raises(ProtocolError):
+        veh.encode(MakeSafe(1, 0.0))
+    with pytest.raises(ProtocolError):
+        ctl.encode(MakeSafeAck(1, 0.0))
+    assert ctl.feed(veh.encode(MakeSafeAck(7, 3.0, False))) == [MakeSafeAck(7, 3.0, False)]

@@ -6,11 +6,9 @@ the controller. The vehicle's watchdog is set long enough for the restart.
 
 from __future__ import annotations
 
-import os
 import re
 import signal
 import subprocess
-import sys
 from collections import Counter
 from pathlib import Path
 
@@ -18,16 +16,14 @@ import pytest
 
 from runtime.eventlog import EventLog
 from tests.conftest import REPO
-from tests.runtime.helpers import POOL_MISSION, kill_9_at, sign_file
-
-BIN = Path(sys.executable).parent
+from tests.runtime.helpers import BIN, POOL_MISSION, kill_9_at, sign_file, start_server, write_psk
 
 
 def _start_vehicle(tmp: Path, key: Path) -> tuple[subprocess.Popen[str], str]:
     source = (REPO / "romeo_sim" / "romeo_vehicle.yaml").read_text()
     config = tmp / "vehicle.yaml"
     config.write_text(re.sub(r"(?m)^watchdog_s:.*$", "watchdog_s: 600.0", source))
-    vehicle = subprocess.Popen(
+    return start_server(
         [
             str(BIN / "romeo-sim"),
             "serve",
@@ -40,21 +36,12 @@ def _start_vehicle(tmp: Path, key: Path) -> tuple[subprocess.Popen[str], str]:
             "--vehicle",
             str(config),
         ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
     )
-    assert vehicle.stdout is not None
-    line = vehicle.stdout.readline()
-    match = re.match(r"listening on (\S+:\d+)", line)
-    assert match, line
-    return vehicle, match.group(1)
 
 
 @pytest.mark.slow
 def test_kill_9_then_resume_loses_and_repeats_nothing(tmp_path: Path) -> None:
-    key = tmp_path / "psk.hex"
-    key.write_text(os.urandom(32).hex())
+    key = write_psk(tmp_path)  # mode 0600: a key file others can read is refused
     certificate = tmp_path / "pool.certificate.json"
     out = tmp_path / "run"
     vehicle, address = _start_vehicle(tmp_path, key)

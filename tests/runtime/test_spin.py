@@ -338,8 +338,9 @@ def spinning(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
         issue: bool = False,
         profiles: Sequence[VehicleProfile] = (),
         trusted: object = None,
+        include_path: Sequence[str | Path] = (),
     ) -> gate.ApprovedMission:
-        loaded = load_mission(Path(mission), profiles)
+        loaded = load_mission(Path(mission), profiles, include_path=include_path)
         return gate.ApprovedMission(loaded, hand_approval(loaded.net), False)
 
     monkeypatch.setattr(gate, "approve_mission", approve)

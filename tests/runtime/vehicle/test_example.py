@@ -243,6 +243,7 @@ def test_main_without_a_key_says_how_to_make_one(
 def test_main_serves_until_interrupted(tmp_path: Path) -> None:
     key = tmp_path / "psk.hex"
     key.write_text(PSK.hex())
+    key.chmod(0o600)  # a key file others can read is refused
     env = {**os.environ, "CORAL_KEY_FILE": str(key), "PYTHONPATH": str(REPO)}
     proc = subprocess.Popen(
         [sys.executable, str(EXAMPLE), "--speed", "10"],

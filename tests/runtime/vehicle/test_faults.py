@@ -67,6 +67,9 @@ class Fake:
     def heard_from_controller(self) -> None:
         self.heard += 1
 
+    def make_safe(self, reason: str) -> list[Reply]:
+        return []  # nothing runs long enough here for a stop to matter
+
     def telemetry(self) -> TelemetryState:
         return TelemetryState(self.clock, 1.0, 2.0, 3.0, 90.0)
 

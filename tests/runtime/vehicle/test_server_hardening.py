@@ -11,14 +11,20 @@ import asyncio
 import contextlib
 import errno
 import random
+import re
+import signal
 import socket
+import subprocess
+import sys
 import time
 from collections.abc import Awaitable, Callable
+from pathlib import Path
 from typing import Any, TypeVar
 
 import pytest
 
 from romeo_sim.vehicle import Vehicle
+from runtime.keys import write_key_file
 from runtime.link import MemoryLink
 from runtime.protocol import (
     MAX_FRAME,
@@ -35,7 +41,8 @@ from runtime.protocol import (
 )
 from runtime.vclock import run_virtual
 from runtime.vehicle import VehicleServer
-from runtime.vehicle.server import _LogThrottle
+from runtime.vehicle import server as server_module
+from runtime.vehicle.server import DESCRIPTOR_RESERVE, _LogThrottle, spare_descriptors
 
 PSK = bytes(range(32))
 WAIT = 3.0  # seconds: the longest any single await may take
@@ -356,3 +363,98 @@ def test_the_log_throttle_summarises_each_period() -> None:
 def test_limits_are_checked(limits: dict[str, Any], message: str) -> None:
     with pytest.raises(ValueError, match=message):
         make_server([], **limits)
+
+
+# ---------------------------------------------------------------------- descriptor limit
+
+
+def test_max_pending_is_fitted_to_the_descriptors_left(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Few descriptors left: the cap is lowered at start, with one warning; many: kept."""
+    outcomes: list[tuple[int, list[str]]] = []
+    for spare in [(DESCRIPTOR_RESERVE + 5, 64), (DESCRIPTOR_RESERVE - 3, 20), (5000, 8192)]:
+        monkeypatch.setattr(server_module, "spare_descriptors", lambda spare=spare: spare)
+        log: list[str] = []
+
+        async def scenario(log: list[str] = log) -> int:
+            async with make_server(log) as server:
+                return server.max_pending
+
+        outcomes.append((asyncio.run(within(scenario())), log))
+    (fitted, warned), (floor, _), (kept, quiet) = outcomes
+    assert fitted == 5 and floor == 1 and kept == 16
+    assert [line for line in warned if "pending connections" in line] == [
+        "at most 5 pending connections, not 16: the descriptor limit (64, ulimit -n) leaves "
+        f"{DESCRIPTOR_RESERVE + 5} free; raise it for more"
+    ]
+    assert not any("pending connections" in line for line in quiet), quiet
+
+
+def test_spare_descriptors_counts_what_this_process_holds() -> None:
+    spare = spare_descriptors()
+    if spare is None:
+        pytest.skip("no descriptor limit to fit on this system")
+    free, soft = spare
+    with socket.socket() as one, socket.socket() as two:
+        assert (one.fileno(), two.fileno()) and spare_descriptors() == (free - 2, soft)
+
+
+LIMITED_SOFT = 28
+"""The served vehicle's soft descriptor limit in the next test: about 11 are open once it
+listens, so the cap of 16 pending connections would run it out of descriptors."""
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="counts descriptors in /proc (Linux)")
+def test_under_a_low_descriptor_limit_the_controller_gets_through_a_flood(
+    tmp_path: Path,
+) -> None:
+    """A real ``romeo-sim serve`` whose soft RLIMIT_NOFILE is lowered (setrlimit, then
+    exec): the cap is lowered at start, no accept ever fails for lack of a descriptor
+    while 40 hostile connections come and hold on, and the controller is adopted."""
+    key = tmp_path / "psk.hex"
+    write_key_file(key, PSK)
+    limit = (
+        "import os, resource, sys\n"
+        "_, hard = resource.getrlimit(resource.RLIMIT_NOFILE)\n"
+        f"resource.setrlimit(resource.RLIMIT_NOFILE, ({LIMITED_SOFT}, hard))\n"
+        "os.execv(sys.argv[1], sys.argv[1:])\n"
+    )
+    romeo = Path(sys.executable).parent / "romeo-sim"
+    serve = [str(romeo), "serve", "--key-file", str(key), "--speed", "20", "--duration", "8"]
+    vehicle = subprocess.Popen(
+        [sys.executable, "-c", limit, *serve],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert vehicle.stdout is not None
+        line = vehicle.stdout.readline()
+        assert line.startswith("listening on 127.0.0.1:"), (line, vehicle.stderr)
+        port = int(line.rsplit(":", 1)[1])
+
+        async def scenario() -> Reply:
+            hostile: list[asyncio.StreamWriter] = []
+            for _ in range(20):
+                hostile.append((await within(asyncio.open_connection("127.0.0.1", port)))[1])
+            await asyncio.sleep(0.3)  # let the vehicle accept them
+            ctl = await Controller.connect(port)
+            await ctl.receive(HelloReply)
+            for _ in range(20):  # more while the controller is pending: it sent a Hello
+                hostile.append((await within(asyncio.open_connection("127.0.0.1", port)))[1])
+            await ctl.send(Heartbeat(0.0))
+            await ctl.command(1, "DEPTH", z=1.0)
+            ack = await ctl.receive(Reply)
+            for writer in hostile:
+                writer.close()
+            await ctl.close()
+            return ack
+
+        ack = asyncio.run(within(scenario(), 10.0))
+    finally:
+        vehicle.send_signal(signal.SIGINT)
+        _, err = vehicle.communicate(timeout=15)
+    assert (ack.command_id, ack.kind) == (1, "ack")
+    match = re.search(r"at most (\d+) pending connections, not 16", err)
+    assert match and 1 <= int(match.group(1)) < 16, err
+    assert "accept failed" not in err and "; 0 accept errors" in err, err
+    assert "1 adopted" in err and "Traceback" not in err, err

@@ -15,12 +15,17 @@ transaction, durable (``synchronous=FULL``) when it returns. A process killed at
 leaves the last committed state and exactly the events that led to it, never half a commit.
 ``docs/eventlog.md`` has the schema, the rule and the event kinds.
 
-Only one process may write a log at a time: the writer holds SQLite's exclusive lock for as
-long as the log is open, so a second controller started on the same file is refused, and
-the kernel drops the lock when the writer dies (even by ``kill -9``), so a resume can take
-it over at once.
+Only one process may write a log at a time: the writer holds an advisory lock on the file
+(``flock``) for as long as the log is open, so a second writer is refused; the kernel drops
+the lock when the writer dies (even by ``kill -9``), so a resume can take it over at once.
+Readers take no lock: the log is in WAL mode while written, so ``coral-run timeline`` reads
+the committed events of a mission that is still running, and never blocks its writer.
 
-Import rule: like `runtime.protocol`, this module imports only the standard library and
+A log created with a key (``mac_key``, `log_key` of the run's pre-shared key) carries a MAC
+chain (`runtime.eventlog.auth`, checked by `runtime.eventlog.chain`): opening it with the
+key verifies every row, so a log edited by hand is refused instead of resumed from.
+
+Import rule: like `runtime.protocol`, this package imports only the standard library and
 ``coral_lang.diagnostics``, so the vehicle simulator may use it without pulling in the engine.
 """
 
@@ -29,31 +34,41 @@ from __future__ import annotations
 import contextlib
 import datetime as dt
 import enum
+import fcntl
 import json
 import math
 import os
 import sqlite3
 import threading
-from collections.abc import Collection, Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Final, Literal, TypeAlias
+from typing import Any, Final, Literal, TypeAlias, TypeGuard
 
 from coral_lang.diagnostics import CoralError
+from runtime.eventlog.auth import CommitMac, header_mac, key_id, log_key, state_digest
+from runtime.eventlog.chain import HEADER_FIELDS, ChainBroken, ChainState, verify_chain
 
 __all__ = [
     "APPLICATION_ID",
+    "READABLE_VERSIONS",
     "SCHEMA_VERSION",
     "Event",
     "EventLog",
     "EventLogError",
     "LogRole",
     "TelemetrySample",
+    "log_key",
 ]
 
-SCHEMA_VERSION: Final = 1
-"""Version of the tables below; a log of another version is refused, never guessed at."""
+SCHEMA_VERSION: Final = 2
+"""Version of the tables below, the one written; a log of a version not in
+`READABLE_VERSIONS` is refused, never guessed at."""
+
+READABLE_VERSIONS: Final = (1, 2)
+"""Versions read: 1 is the same without the MAC chain (``header.key_id``, ``header.mac``,
+``commits``), so a version 1 log reads as an unauthenticated one."""
 
 APPLICATION_ID: Final = 0x434F524C
 """SQLite's ``application_id`` of a coral event log ("CORL"): tells our logs from other
@@ -73,7 +88,9 @@ CREATE TABLE header (
     created        TEXT    NOT NULL,
     meta           TEXT    NOT NULL,
     net_json       TEXT,
-    net_digest     TEXT
+    net_digest     TEXT,
+    key_id         TEXT,
+    mac            TEXT
 );
 CREATE TABLE events (
     seq  INTEGER PRIMARY KEY,
@@ -99,7 +116,20 @@ CREATE TABLE checkpoint (
     event_seq INTEGER NOT NULL,
     state     TEXT    NOT NULL
 );
+CREATE TABLE commits (
+    n         INTEGER PRIMARY KEY,
+    event_seq INTEGER NOT NULL,
+    sample_n  INTEGER NOT NULL,
+    state_sha TEXT,
+    mac       TEXT
+);
 """
+
+_MIN_KEY: Final = 16
+
+_READ_TIMEOUT: Final = 2.0
+"""Seconds SQLite may wait on a lock held for an instant (WAL recovery, a checkpoint);
+the one-writer rule is the ``flock``, refused at once, not a SQLite lock."""
 
 
 class EventLogError(CoralError, ValueError):
@@ -244,15 +274,10 @@ def _explain(path: Path, doing: str, error: sqlite3.Error) -> EventLogError:
     code = getattr(error, "sqlite_errorcode", -1) & 0xFF
     if code in (_SQLITE_BUSY, _SQLITE_LOCKED) and doing == "read the log":
         why = (
-            "it is open for writing by another process (the mission is still running?); "
-            "read it once that process has ended"
+            "it is busy (another process is recovering or checkpointing it); try again in a moment"
         )
     elif code in (_SQLITE_BUSY, _SQLITE_LOCKED):
-        why = (
-            "it is open for writing by another process (a second controller or vehicle "
-            "on the same log?); only one writer at a time: wait for it to end or use "
-            "another file"
-        )
+        why = _HELD
     elif code == _SQLITE_NOTADB:
         why = "it is not a SQLite database, so not a coral event log"
     elif code == _SQLITE_CORRUPT:
@@ -268,6 +293,44 @@ def _explain(path: Path, doing: str, error: sqlite3.Error) -> EventLogError:
     else:
         why = str(error)
     return EventLogError(f"{path}: cannot {doing}: {why}")
+
+
+_HELD: Final = (
+    "it is open for writing by another process (a second controller or vehicle on the same "
+    "log?); only one writer at a time: wait for it to end or use another file"
+)
+
+
+def _hold(path: Path, fd: int) -> int:
+    """Take the writer's lock on the open file ``fd`` (closed on refusal); returns ``fd``.
+
+    ``flock`` locks are apart from SQLite's own (POSIX record) locks on Linux, so holding
+    one neither disturbs SQLite nor keeps readers out; the kernel drops it with the
+    process, ``kill -9`` included.
+    """
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as error:
+        os.close(fd)
+        if isinstance(error, BlockingIOError):
+            raise EventLogError(f"{path}: cannot open the log: {_HELD}") from None
+        raise EventLogError(f"{path}: cannot lock the log: {error.strerror}") from None
+    return fd
+
+
+def _check_key(path: Path, key: bytes | None) -> bytes | None:
+    if key is None:
+        return None
+    if not isinstance(key, bytes | bytearray) or len(key) < _MIN_KEY:
+        raise EventLogError(
+            f"{path}: a log key must be at least {_MIN_KEY} bytes (use log_key(psk))"
+        )
+    return bytes(key)
+
+
+def _is_real(value: object) -> TypeGuard[int | float]:
+    """A number SQLite hands back for a REAL column (never a bool, text or blob)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _no_tables(db: sqlite3.Connection) -> bool:
@@ -299,6 +362,8 @@ class EventLog:
     net_digest: str | None
     path: Path
     writable: bool
+    schema_version: int
+    authenticated: bool
 
     def __init__(
         self,
@@ -307,11 +372,17 @@ class EventLog:
         *,
         writable: bool,
         header: tuple[object, ...],
+        version: int = SCHEMA_VERSION,
+        authenticated: bool = False,
+        lock: int | None = None,
     ) -> None:
         """Internal: use `create` or `open`."""
         self._db: sqlite3.Connection | None = connection
+        self._lock_fd = lock
         self.path = path
         self.writable = writable
+        self.schema_version = version
+        self.authenticated = authenticated
         role, mission, created, meta, net_json, net_digest = header
         self.role = str(role)
         self.mission = str(mission)
@@ -323,6 +394,10 @@ class EventLog:
         self._events: list[tuple[float, str, str]] = []
         self._samples: list[tuple[object, ...]] = []
         self._lock = threading.Lock()
+        # Where the chain stands (writers): the key, the last MAC, and the last commit,
+        # event and sample, kept in memory so an append costs the same at any length.
+        self._key: bytes | None = None
+        self._chain = ChainState(b"", 0, 0, 0, 0)
 
     # --- opening ----------------------------------------------------------------------------
 
@@ -336,8 +411,12 @@ class EventLog:
         meta: Mapping[str, object],
         net_json: str | None = None,
         net_digest: str | None = None,
+        mac_key: bytes | None = None,
     ) -> EventLog:
         """Start a new log at ``path`` and hold it for writing.
+
+        The file (and SQLite's ``-wal`` and ``-shm`` beside it, which take its mode) is
+        readable by its owner only: a log holds the mission, positions and commands.
 
         Args:
             path: the new file; an existing file is never overwritten (a previous mission's
@@ -349,6 +428,10 @@ class EventLog:
                 JSON, with non-finite floats stored as in `Event.data`.
             net_json: the compiled net, stored once (the controller's log).
             net_digest: its digest (``Net.digest()``), which the certificate names.
+            mac_key: the log key (`log_key` of the run's pre-shared key): the header and
+                every commit are chained under it, so edits are detected when the log is
+                opened with it. None writes an unauthenticated log (a run whose key dies
+                with it, ``coral-run fuzz``): readable, but never trusted for a resume.
 
         Raises:
             EventLogError: the file exists, the folder is missing or read-only, the disk is
@@ -357,13 +440,14 @@ class EventLog:
         target = Path(path)
         if role not in _ROLES:
             raise EventLogError(f"{target}: role must be 'controller' or 'vehicle', not {role!r}")
+        key = _check_key(target, mac_key)
         try:
             meta_json = _dumps(_jsonable(dict(meta), "meta"))
         except _NotJson as bad:
             raise bad.error(f"{target}: ") from None
         try:
             # O_EXCL: refuse an existing file atomically, even against a racing creator.
-            os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+            fd = os.open(target, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600)
         except FileExistsError:
             raise EventLogError(
                 f"{target}: already exists; a log is never overwritten. Choose a new file, "
@@ -371,14 +455,29 @@ class EventLog:
             ) from None
         except OSError as error:
             raise EventLogError(f"{target}: cannot create: {error.strerror}") from None
+        try:
+            os.fchmod(fd, 0o600)  # whatever the umask: owner only
+            _hold(target, fd)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.close(fd)
+            target.unlink(missing_ok=True)
+            raise
         created = dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
         header = (role, mission, created, meta_json, net_json, net_digest)
+        auth: tuple[str | None, str | None] = (None, None)
+        mac = b""
+        if key is not None:
+            mac = header_mac(key, (SCHEMA_VERSION, *header))
+            auth = (key_id(key), mac.hex())
         try:
             db = cls._connect(target, writable=True)
         except sqlite3.Error as error:
+            os.close(fd)
             target.unlink(missing_ok=True)  # ours (O_EXCL above): leave nothing half-made
             raise _explain(target, "create the log", error) from None
         try:
+            cls._start_writing(db)
             # One transaction: an interrupted creation leaves no half-made log.
             db.execute("BEGIN EXCLUSIVE")
             db.execute(f"PRAGMA application_id = {APPLICATION_ID}")
@@ -387,31 +486,49 @@ class EventLog:
                 if statement.strip():
                     db.execute(statement)
             db.execute(
-                "INSERT INTO header (id, schema_version, role, mission, created, meta, "
-                "net_json, net_digest) VALUES (1, ?, ?, ?, ?, ?, ?, ?)",
-                (SCHEMA_VERSION, *header),
+                f"INSERT INTO header (id, {HEADER_FIELDS}, key_id, mac) "
+                "VALUES (1, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (SCHEMA_VERSION, *header, *auth),
             )
             db.execute("COMMIT")
         except sqlite3.Error as error:
             db.close()
+            os.close(fd)
             target.unlink(missing_ok=True)
             raise _explain(target, "create the log", error) from None
-        return cls(db, target, writable=True, header=header)
+        log = cls(db, target, writable=True, header=header, authenticated=key is not None, lock=fd)
+        log._key = key
+        log._chain = ChainState(mac, 0, 0, 0, 0)
+        return log
 
     @classmethod
-    def open(cls, path: str | Path, *, writable: bool = False) -> EventLog:
+    def open(
+        cls, path: str | Path, *, writable: bool = False, mac_key: bytes | None = None
+    ) -> EventLog:
         """Open an existing log: writable to resume a mission, read-only for the timeline.
 
-        A writable log is held exclusively until `close` (a second writer, or a reader,
-        is refused meanwhile). A log left by a killed writer opens normally: SQLite rolls
-        its uncommitted tail back and the last commit is intact.
+        A writable log is held until `close`: a second writer is refused meanwhile, while
+        readers may open it at any time and see what was committed. A log left by a killed
+        writer opens normally: SQLite rolls its uncommitted tail back and the last commit
+        is intact.
+
+        Args:
+            path: the log.
+            writable: to append to it (a resume).
+            mac_key: the log key: verify the whole log under it first (`verify`), and keep
+                extending its chain. Required to append to an authenticated log; a log
+                that is not authenticated is refused with a key (its edits could not be
+                told). None opens any readable log without verifying it
+                (`authenticated` says whether it could be).
 
         Raises:
             EventLogError: the file is missing, empty, not a SQLite database, another
-                application's database, of another schema version, damaged, or open for
-                writing by another process.
+                application's database, of another schema version, damaged, open for
+                writing by another process, or (with ``mac_key``) it does not verify:
+                written with another key, edited, or not authenticated.
         """
         target = Path(path)
+        key = _check_key(target, mac_key)
         try:
             info = target.stat()
         except FileNotFoundError:
@@ -425,30 +542,76 @@ class EventLog:
                 f"{target}: the file is empty, not a coral event log (its creation was "
                 "interrupted?)"
             )
+        fd = None
+        if writable:
+            try:
+                fd = _hold(target, os.open(target, os.O_RDONLY | os.O_CLOEXEC))
+            except OSError as error:
+                raise EventLogError(f"{target}: cannot open: {error.strerror}") from None
+        try:
+            log = cls._open_locked(target, writable=writable, key=key, lock=fd)
+        except BaseException:
+            if fd is not None:
+                os.close(fd)
+            raise
+        return log
+
+    @classmethod
+    def _open_locked(
+        cls, target: Path, *, writable: bool, key: bytes | None, lock: int | None
+    ) -> EventLog:
         try:
             db = cls._connect(target, writable=writable)
         except sqlite3.Error as error:
             raise _explain(target, "open the log", error) from None
         try:
-            header = cls._check(db, target, writable=writable)
+            version, header, authenticated = cls._check(db, target, writable=writable)
+            log = cls(
+                db,
+                target,
+                writable=writable,
+                header=header,
+                version=version,
+                authenticated=authenticated,
+                lock=lock,
+            )
         except BaseException:
             db.close()
             raise
-        return cls(db, target, writable=writable, header=header)
+        try:
+            if key is not None:
+                log._chain = log._verify(key)
+                log._key = key
+            elif writable and authenticated:
+                raise EventLogError(
+                    f"{target}: the log is authenticated: appending to it needs its key "
+                    "(the run's pre-shared key)"
+                )
+            elif writable:
+                log._chain = log._unverified_chain()
+            if writable:
+                cls._start_writing(db)
+        except sqlite3.Error as error:
+            log._abandon()
+            raise _explain(target, "open the log", error) from None
+        except BaseException:
+            log._abandon()
+            raise
+        return log
+
+    def _abandon(self) -> None:
+        """Close a log refused while opening, leaving the file exactly as it was."""
+        self._lock_fd = None  # the caller closes it
+        self.writable = False  # nothing to commit, no journal mode to switch back
+        self.close()
 
     @staticmethod
     def _connect(path: Path, *, writable: bool) -> sqlite3.Connection:
-        # timeout=0: a log held by another writer is refused at once, with a clear message,
-        # instead of waiting for a process that may run for hours.
-        db = sqlite3.connect(path, timeout=0, isolation_level=None, check_same_thread=False)
+        db = sqlite3.connect(
+            path, timeout=_READ_TIMEOUT, isolation_level=None, check_same_thread=False
+        )
         try:
-            if writable:
-                # Exclusive before WAL: no shared-memory index, and the lock is held from
-                # the first access until close, which is what refuses a second writer.
-                db.execute("PRAGMA locking_mode = EXCLUSIVE")
-                db.execute("PRAGMA journal_mode = WAL")
-                db.execute("PRAGMA synchronous = FULL")
-            else:
+            if not writable:
                 db.execute("PRAGMA query_only = ON")
         except BaseException:
             db.close()
@@ -456,12 +619,23 @@ class EventLog:
         return db
 
     @staticmethod
-    def _check(db: sqlite3.Connection, path: Path, *, writable: bool) -> tuple[object, ...]:
-        """Take the lock (writable), check it is a sound coral log, return its header."""
+    def _start_writing(db: sqlite3.Connection) -> None:
+        """Switch to WAL, durable commits; only once the log was found sound, so that a
+        refused log is left untouched.
+
+        WAL: readers (the timeline of a running mission) read the last commit while the
+        writer appends, and neither waits for the other.
+        """
+        db.execute("PRAGMA journal_mode = WAL")
+        db.execute("PRAGMA synchronous = FULL")
+
+    @staticmethod
+    def _check(
+        db: sqlite3.Connection, path: Path, *, writable: bool
+    ) -> tuple[int, tuple[object, ...], bool]:
+        """Check it is a sound coral log; return its version, header and whether it has
+        a MAC chain."""
         try:
-            if writable:
-                db.execute("BEGIN EXCLUSIVE")
-                db.execute("COMMIT")
             app = db.execute("PRAGMA application_id").fetchone()[0]
             if app != APPLICATION_ID:
                 hint = " (its creation was interrupted?)" if app == 0 and _no_tables(db) else ""
@@ -470,10 +644,10 @@ class EventLog:
                     f"(application_id {app:#x}, expected {APPLICATION_ID:#x}){hint}"
                 )
             version = db.execute("PRAGMA user_version").fetchone()[0]
-            if version != SCHEMA_VERSION:
+            if version not in READABLE_VERSIONS:
                 raise EventLogError(
-                    f"{path}: event log schema version {version}; this coral reads version "
-                    f"{SCHEMA_VERSION} only (use the coral that wrote it)"
+                    f"{path}: event log schema version {version}; this coral reads versions "
+                    f"{', '.join(map(str, READABLE_VERSIONS))} only (use the coral that wrote it)"
                 )
             problems = [row[0] for row in db.execute("PRAGMA quick_check(5)")]
             if problems != ["ok"]:
@@ -481,28 +655,79 @@ class EventLog:
                     f"{path}: the file is damaged (truncated or overwritten): "
                     + "; ".join(str(p) for p in problems)
                 )
-            row = db.execute(
-                "SELECT schema_version, role, mission, created, meta, net_json, net_digest "
-                "FROM header WHERE id = 1"
-            ).fetchone()
+            auth = ", mac" if version >= 2 else ", NULL"
+            row = db.execute(f"SELECT {HEADER_FIELDS}{auth} FROM header WHERE id = 1").fetchone()
         except sqlite3.Error as error:
             raise _explain(path, "open the log" if writable else "read the log", error) from None
         if row is None:
             raise EventLogError(f"{path}: the header row is missing; the file is damaged")
-        if row[0] != SCHEMA_VERSION:
+        if row[0] != version:
             raise EventLogError(
-                f"{path}: event log schema version {row[0]}; this coral reads version "
-                f"{SCHEMA_VERSION} only (use the coral that wrote it)"
+                f"{path}: the header says schema version {row[0]!r}, the file {version}; "
+                "the file is damaged or edited"
             )
         if row[1] not in _ROLES:
             raise EventLogError(f"{path}: unknown role {row[1]!r} in the header")
         try:
             json.loads(row[4])
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, RecursionError):
             raise EventLogError(
                 f"{path}: the header's meta is not JSON; the file is damaged"
             ) from None
-        return tuple(row[1:])
+        return int(version), tuple(row[1:7]), row[7] is not None
+
+    # --- verifying --------------------------------------------------------------------------
+
+    def verify(self, mac_key: bytes) -> None:
+        """Check the whole log under ``mac_key``: header, every row, the checkpoint.
+
+        Proves that every committed row and the checkpoint are what a holder of the key
+        wrote, in that order, and that the checkpoint is the state committed last. It
+        cannot tell a log cut back to an earlier commit (``docs/eventlog.md``, "The MAC
+        chain").
+
+        Raises:
+            EventLogError: naming the log and the first thing that does not verify: not
+                authenticated (schema 1, or written without a key), written with another
+                key, the header, a missing, inserted or changed row, or a checkpoint
+                forged or put back.
+        """
+        self._verify(_check_key(self.path, mac_key))
+
+    def _verify(self, key: bytes | None) -> ChainState:
+        assert key is not None
+        if self.schema_version < 2:
+            raise EventLogError(
+                f"{self.path}: the log is not authenticated (schema version "
+                f"{self.schema_version}, before the MAC chain), so edits to it cannot be "
+                "detected"
+            )
+        with self._lock:
+            db = self._connection()
+            try:
+                return verify_chain(db, key)
+            except ChainBroken as broken:
+                raise EventLogError(f"{self.path}: {broken}") from None
+            except sqlite3.Error as error:
+                raise _explain(self.path, "read the log", error) from None
+
+    def _unverified_chain(self) -> ChainState:
+        """Where an unauthenticated log stands, for a writer to go on appending."""
+        n = self._query_one("SELECT coalesce(max(n), 0) FROM commits") if self._chained else None
+        seq = self._query_one("SELECT coalesce(max(seq), 0) FROM events")
+        sample = self._query_one("SELECT coalesce(max(n), 0) FROM telemetry")
+        states = self._query_one("SELECT commits FROM checkpoint WHERE id = 1")
+        return ChainState(
+            b"",
+            0 if n is None else int(n[0]),
+            0 if seq is None else int(seq[0]),
+            0 if sample is None else int(sample[0]),
+            0 if states is None else int(states[0]),
+        )
+
+    @property
+    def _chained(self) -> bool:
+        return self.schema_version >= 2
 
     # --- writing ----------------------------------------------------------------------------
 
@@ -528,7 +753,7 @@ class EventLog:
         except _NotJson as bad:
             raise bad.error(f"{self.path}: event {kind!r}: ") from None
         with self._lock:
-            self._events.append((moment, kind, text))
+            self._events.append((moment, str(kind), text))
 
     def telemetry(self, sample: TelemetrySample) -> None:
         """Buffer one telemetry sample; it is written by the next `commit` (or `close`).
@@ -585,25 +810,42 @@ class EventLog:
             if state_json is None and not self._events and not self._samples:
                 return
             db = self._connection()
+            chain = self._chain
+            events = [(chain.event_seq + i, *row) for i, row in enumerate(self._events, 1)]
+            samples = [(chain.sample_n + i, *row) for i, row in enumerate(self._samples, 1)]
+            state_sha = None if state_json is None else state_digest(state_json)
+            after = self._next_chain(events, samples, state_sha)
             try:
                 db.execute("BEGIN IMMEDIATE")
-                if self._events:
+                if events:
                     db.executemany(
-                        "INSERT INTO events (time, kind, data) VALUES (?, ?, ?)", self._events
+                        "INSERT INTO events (seq, time, kind, data) VALUES (?, ?, ?, ?)", events
                     )
-                if self._samples:
+                if samples:
                     db.executemany(
-                        "INSERT INTO telemetry (time, seq, x, y, z, psi, est_x, est_y) "
-                        "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                        self._samples,
+                        "INSERT INTO telemetry (n, time, seq, x, y, z, psi, est_x, est_y) "
+                        "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                        samples,
                     )
                 if state_json is not None:
                     db.execute(
                         "INSERT INTO checkpoint (id, commits, event_seq, state) "
-                        "VALUES (1, 1, (SELECT coalesce(max(seq), 0) FROM events), ?) "
-                        "ON CONFLICT (id) DO UPDATE SET commits = commits + 1, "
-                        "event_seq = excluded.event_seq, state = excluded.state",
-                        (state_json,),
+                        "VALUES (1, ?, ?, ?) ON CONFLICT (id) DO UPDATE SET "
+                        "commits = excluded.commits, event_seq = excluded.event_seq, "
+                        "state = excluded.state",
+                        (after.state_commits, after.event_seq, state_json),
+                    )
+                if self._chained:
+                    db.execute(
+                        "INSERT INTO commits (n, event_seq, sample_n, state_sha, mac) "
+                        "VALUES (?, ?, ?, ?, ?)",
+                        (
+                            after.commits,
+                            after.event_seq,
+                            after.sample_n,
+                            state_sha,
+                            after.mac.hex() if self._key is not None else None,
+                        ),
                     )
                 db.execute("COMMIT")
             except sqlite3.Error as error:
@@ -611,8 +853,43 @@ class EventLog:
                     with contextlib.suppress(sqlite3.Error):
                         db.execute("ROLLBACK")
                 raise _explain(self.path, "commit to the log", error) from None
+            self._chain = after  # only now: a failed commit leaves the chain where it was
             self._events.clear()
             self._samples.clear()
+
+    def _next_chain(
+        self,
+        events: Sequence[tuple[object, ...]],
+        samples: Sequence[tuple[object, ...]],
+        state_sha: str | None,
+    ) -> ChainState:
+        """The chain once this commit is written: counters, and its MAC if keyed."""
+        chain = self._chain
+        commits = chain.commits + 1
+        event_seq = chain.event_seq + len(events)
+        sample_n = chain.sample_n + len(samples)
+        mac = b""
+        if self._key is not None:
+            commit = CommitMac(
+                self._key,
+                chain.mac,
+                n=commits,
+                event_seq=event_seq,
+                sample_n=sample_n,
+                state_sha=state_sha,
+            )
+            for event in events:
+                commit.event(event)
+            for sample in samples:
+                commit.sample(sample)
+            mac = commit.digest()
+        return ChainState(
+            mac,
+            commits,
+            event_seq,
+            sample_n,
+            chain.state_commits + (state_sha is not None),
+        )
 
     # --- reading ----------------------------------------------------------------------------
 
@@ -668,11 +945,32 @@ class EventLog:
                 (last, *(wanted or ())),
             )
             for seq, time, kind, data in rows:
-                loaded = json.loads(data)
-                yield Event(seq, time, kind, dict(loaded) if isinstance(loaded, dict) else {})
+                yield self._event(seq, time, kind, data)
             if len(rows) < _BATCH:
                 return
             last = rows[-1][0]
+
+    def _event(self, seq: int, time: object, kind: object, data: object) -> Event:
+        """One events row as an `Event`; a row no writer could have made is refused by
+        name (an edited log must give a message, never a traceback in a reader)."""
+        if not _is_real(time) or not isinstance(kind, str) or not isinstance(data, str):
+            raise EventLogError(
+                f"{self.path}: event {seq} holds values of the wrong type; the file is "
+                "damaged or edited"
+            )
+        try:
+            loaded = json.loads(data)
+        except (ValueError, RecursionError):
+            raise EventLogError(
+                f"{self.path}: the data of event {seq} is not JSON (or nested too deep); "
+                "the file is damaged or edited"
+            ) from None
+        if not isinstance(loaded, dict):
+            raise EventLogError(
+                f"{self.path}: the data of event {seq} is not a JSON object; the file is "
+                "damaged or edited"
+            )
+        return Event(seq, float(time), kind, loaded)
 
     def samples(self) -> Iterator[TelemetrySample]:
         """Committed telemetry samples in the order they were written."""
@@ -684,7 +982,16 @@ class EventLog:
                 f"ORDER BY n LIMIT {_BATCH}",
                 (last,),
             )
-            for _, time, seq, x, y, z, psi, est_x, est_y in rows:
+            for n, time, seq, x, y, z, psi, est_x, est_y in rows:
+                if not (
+                    _is_real(time)
+                    and isinstance(seq, int)
+                    and all(v is None or _is_real(v) for v in (x, y, z, psi, est_x, est_y))
+                ):
+                    raise EventLogError(
+                        f"{self.path}: telemetry row {n} holds values of the wrong type; "
+                        "the file is damaged or edited"
+                    )
                 yield TelemetrySample(
                     time,
                     seq,
@@ -716,7 +1023,9 @@ class EventLog:
         happened; the checkpoint stays the last one given to `commit`, so a resume still
         starts from a consistent state (`checkpoint_seq` tells which events came after it).
         A writable log is switched back to a plain rollback journal, so a finished log is
-        one self-contained file, readable even from read-only media. Closing twice is fine.
+        one self-contained file, readable even from read-only media (unless a reader still
+        has it open: then it stays in WAL mode, as valid, and the writer does not wait).
+        Closing twice is fine.
 
         Raises:
             EventLogError: the pending buffer could not be written (disk full...); the file
@@ -733,11 +1042,15 @@ class EventLog:
             self._samples.clear()
             try:
                 if self.writable:
+                    db.execute("PRAGMA busy_timeout = 0")  # never wait for a reader
                     db.execute("PRAGMA journal_mode = DELETE")
             except sqlite3.Error:
                 pass  # still a valid WAL database; the next opener checkpoints it
             finally:
                 db.close()
+                lock, self._lock_fd = self._lock_fd, None
+                if lock is not None:
+                    os.close(lock)  # after SQLite's: the next writer may take it over now
 
     @property
     def closed(self) -> bool:

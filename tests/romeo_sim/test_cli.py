@@ -1,0 +1,100 @@
+"""``romeo-sim serve``: its own event log (``--log``), and the key rules of runtime/keys.py."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from romeo_sim.cli import main
+from runtime.eventlog import EventLog, log_key
+from runtime.keys import write_key_file
+from tests.romeo_sim.test_server import PSK, Controller, within
+
+ROMEO_SIM = Path(sys.executable).parent / "romeo-sim"
+
+
+@pytest.fixture
+def key(tmp_path: Path) -> Path:
+    path = tmp_path / "psk.hex"
+    write_key_file(path, PSK)
+    return path
+
+
+def test_an_existing_log_file_is_refused_and_kept(
+    tmp_path: Path, key: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    existing = tmp_path / "vehicle.sqlite"
+    existing.write_bytes(b"an earlier run")
+    code = main(["serve", "--key-file", str(key), "--duration", "0", "--log", str(existing)])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert f"{existing}: already exists" in err and "never overwritten" in err
+    assert existing.read_bytes() == b"an earlier run"
+
+
+def test_a_log_in_a_missing_folder_is_refused(
+    tmp_path: Path, key: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    where = tmp_path / "nowhere" / "vehicle.sqlite"
+    assert main(["serve", "--key-file", str(key), "--log", str(where)]) == 2
+    assert "no such folder" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(os.name != "posix", reason="file modes are POSIX")
+def test_a_key_file_others_can_read_is_refused(
+    key: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    key.chmod(0o644)
+    assert main(["serve", "--key-file", str(key), "--duration", "0"]) == 2
+    assert f"fix with 'chmod 600 {key}'" in capsys.readouterr().err
+
+
+def test_help_says_to_prefer_the_key_file(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["serve", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "prefer --key-file" in out and "--log FILE" in out
+
+
+def test_serve_writes_its_log_named_after_the_mission_id(tmp_path: Path, key: Path) -> None:
+    """A real ``romeo-sim serve --log``: nothing is written until a controller is adopted;
+    then the log's mission is its wire mission id, and the command is recorded."""
+    path = tmp_path / "vehicle.sqlite"
+    vehicle = subprocess.Popen(
+        [
+            *(str(ROMEO_SIM), "serve", "--key-file", str(key), "--speed", "20"),
+            *("--duration", "20", "--log", str(path)),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert vehicle.stdout is not None
+        line = vehicle.stdout.readline()
+        assert line.startswith("listening on 127.0.0.1:"), line
+        assert not path.exists()
+
+        async def mission() -> None:
+            ctl = await Controller.connect(int(line.rsplit(":", 1)[1]), nonce=b"m" * 16)
+            await ctl.command(1, "DEPTH", z=1.0)
+            await ctl.reply(1, "ack")
+            await ctl.close()
+
+        asyncio.run(within(mission(), 10.0))
+    finally:
+        vehicle.send_signal(signal.SIGINT)
+        _, err = vehicle.communicate(timeout=15)
+    assert vehicle.returncode == 0, err
+    with EventLog.open(path, mac_key=log_key(PSK)) as log:  # authenticated under the key
+        assert (log.role, log.mission) == ("vehicle", "7")
+        assert log.meta["mission_id"] == 7 and log.meta["speed"] == 20.0
+        assert log.meta["vehicle"] == "ROMEO"
+        kinds = [event.kind for event in log.events()]
+    assert kinds[:2] == ["adopt", "command-received"] and "reply-issued" in kinds
