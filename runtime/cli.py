@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gc
+import shlex
 import signal
 import sys
 import threading
@@ -307,21 +308,29 @@ def _resume_command(options: argparse.Namespace, log: Path) -> str:
     parts = ["coral-run", "--resume", str(log)]
     if options.vehicle is not None:
         parts += ["--vehicle", f"{options.vehicle[0]}:{options.vehicle[1]}"]
+    if options.key_hex is not None:  # never printed: it is the key
+        parts += ["--key-hex", "HEX"]
     for flag, value in (
         ("--key-file", options.key_file),
         ("--certificate", options.certificate),
         ("--trusted-keys", options.trusted_keys),
         ("--link", options.link),
+        ("--telemetry-host", options.telemetry_host),
+        ("--simulator", options.simulator),
+        ("--sim-config", options.sim_config),
+        ("--time-limit", options.time_limit),
     ):
         if value is not None:
             parts += [flag, str(value)]
+    for profile in options.profile:
+        parts += ["--profile", str(profile)]
     if options.realtime:
         parts.append("--realtime")
         if options.speed != 1.0:
             parts += ["--speed", f"{options.speed:g}"]
     if options.verify:
         parts.append("--verify")
-    return " ".join(parts)
+    return shlex.join(parts)
 
 
 def _stopped_message(result: RunResult, options: argparse.Namespace, log: Path) -> str:

@@ -266,6 +266,8 @@ class Controller:
         # Stopping: the reason, the wait a stop request cancels, a request not yet acted on.
         self._stop_reason: str | None = None
         self._stop_requests = 0
+        self._make_safe_end: float | None = None  # when the make-safe budget runs out
+        self._resend_due = 0  # the vehicle's last reply number, until its re-sends begin
         self._waiting: asyncio.Future[object] | None = None
         self._interrupt_pending = False
 
@@ -529,6 +531,11 @@ class Controller:
                 f"the vehicle no longer knows mission {self.mission_id} (it restarted or "
                 "ended it, e.g. surfaced after losing the controller): not resuming blind"
             )
+        # The vehicle re-sends every reply after ours that is not acknowledged, first thing
+        # once it adopts this connection. Had it issued more than we consumed, the next
+        # of them must come before anything else: if not, it was acknowledged, so this
+        # log lost the commits that consumed it (`_receive`).
+        self._resend_due = reply.last_reply_seq if reply.resumed else 0
         assert codec.session_key is not None
         self._telemetry = DatagramReceiver(codec.session_key)
         self._rejections_seen = self._rejections_unlogged = 0
@@ -606,9 +613,17 @@ class Controller:
                 valid = True
                 if isinstance(item, Reply):
                     self.mission_known = True
+                    self._resend_due = 0
                     self._on_reply(conn, codec, item)
                 elif isinstance(item, Heartbeat):
                     self.mission_known = True
+                    if self._resend_due > self.consumed:
+                        raise _LogBehind(
+                            f"the vehicle has issued replies up to #{self._resend_due} but "
+                            f"re-sent none after #{self.consumed}: it had them acknowledged, "
+                            "so the log lost its last commits; the mission's state is unknown "
+                            "here: take over the vehicle by hand, do not resume from this log"
+                        )
             if not valid:
                 # Only garbage arrived: it must not keep a dead connection alive forever.
                 continue
@@ -730,8 +745,11 @@ class Controller:
 
     # ------------------------------------------------------------------ stopping
 
-    async def _make_safe(self, conn: Connection, codec: StreamCodec, timeout: float) -> bool:
-        """Ask the vehicle to make itself safe; True once it acknowledged within ``timeout``.
+    async def _make_safe(self, conn: Connection, codec: StreamCodec, timeout: float) -> bool | None:
+        """Ask the vehicle to make itself safe; True once it acknowledged within ``timeout``,
+        False when it did not (or a second stop request ended the wait), None when the
+        connection was lost first: then `run` asks again on a new one, within what is
+        left of the same ``make_safe_timeout``.
 
         Replies that arrive meanwhile (the stopped commands' ``timeout`` and ``error``
         among them) are neither consumed nor acknowledged: the vehicle keeps them, and
@@ -742,11 +760,13 @@ class Controller:
         request_id = int.from_bytes(self._nonces(4), "big")
         now = self._now()
         end = now + timeout
+        if self._make_safe_end is None:
+            self._make_safe_end = end
         try:
             self._write(conn, codec, MakeSafe(request_id, now, reason))
         except (ConnectionError, OSError) as exc:
             self._note("make-safe-failed", f"make-safe not sent: {exc}", reason=str(exc))
-            return False
+            return None
         self.log.event(now, "make-safe-sent", request_id=request_id, reason=reason)
         self.log.commit(None)
         self._console(
@@ -762,7 +782,10 @@ class Controller:
                 self._note("make-safe-abandoned", "second stop request: not waiting any longer")
                 return False
             if not data:
-                break
+                self._note(
+                    "make-safe-failed", "connection lost before the make-safe acknowledgement"
+                )
+                return None
             for item in codec.feed(data):
                 if isinstance(item, MakeSafeAck) and item.request_id == request_id:
                     self.log.event(
@@ -794,6 +817,8 @@ class Controller:
         the mission is left alone, so as not to start a new one under its id.
         """
         budget = self.options.make_safe_timeout
+        if self._make_safe_end is not None:  # a first try lost its connection
+            budget = max(0.0, self._make_safe_end - self._now())
         end = self._now() + budget
         conn: Connection | None = None
         try:
@@ -818,7 +843,7 @@ class Controller:
                     "make-safe not sent: the vehicle no longer knows the mission",
                 )
                 return False
-            return await self._make_safe(conn, codec, max(0.0, end - self._now()))
+            return await self._make_safe(conn, codec, max(0.0, end - self._now())) is True
         except (ConnectionError, OSError, TimeoutError, _ConnectionLost) as exc:
             self._note(
                 "make-safe-failed",

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import ipaddress
 import socket
 from collections.abc import Callable
@@ -130,10 +131,24 @@ class SocketLink(EmulatedLink):
         path = await self._attempt()
         try:
             local = None if self._local_host is None else (self._local_host, 0)
-            reader, writer = await asyncio.wait_for(
-                asyncio.open_connection(self.host, self.port, local_addr=local),
-                self._connect_timeout,
-            )
+            try:
+                reader, writer = await asyncio.wait_for(
+                    asyncio.open_connection(self.host, self.port, local_addr=local),
+                    self._connect_timeout,
+                )
+            except OSError as exc:
+                if local is None or exc.errno != errno.EADDRNOTAVAIL:
+                    raise
+                # The telemetry address is gone (an interface went down, a new DHCP
+                # lease): reaching the vehicle matters more than where telemetry lands.
+                self._local_host = None
+                self._log(
+                    f"link: {local[0]} is no longer an address of this machine; connecting "
+                    "from any address (telemetry may not arrive until the run is restarted)"
+                )
+                reader, writer = await asyncio.wait_for(
+                    asyncio.open_connection(self.host, self.port), self._connect_timeout
+                )
         except TimeoutError:
             raise self._failed(
                 f"cannot connect to {self.host}:{self.port}: no answer in "

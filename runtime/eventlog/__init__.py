@@ -35,6 +35,7 @@ import contextlib
 import datetime as dt
 import enum
 import fcntl
+import functools
 import json
 import math
 import os
@@ -328,6 +329,50 @@ def _check_key(path: Path, key: bytes | None) -> bytes | None:
     return bytes(key)
 
 
+def _schema_of(db: sqlite3.Connection) -> list[tuple[Any, ...]]:
+    return [
+        tuple(row)
+        for row in db.execute(
+            "SELECT type, name, tbl_name, sql FROM sqlite_master ORDER BY type, name"
+        )
+    ]
+
+
+@functools.cache
+def _written_schema() -> tuple[tuple[Any, ...], ...]:
+    """The tables and index exactly as `EventLog.create` writes them (version 2)."""
+    db = sqlite3.connect(":memory:")
+    try:
+        for statement in _SCHEMA.split(";"):
+            if statement.strip():
+                db.execute(statement)
+        return tuple(_schema_of(db))
+    finally:
+        db.close()
+
+
+def _check_schema(db: sqlite3.Connection, path: Path, version: int) -> None:
+    """Refuse a log whose tables are not the ones coral writes.
+
+    Why: the MAC chain authenticates rows, but SQLite reads through the schema stored in
+    the file. A view named ``checkpoint`` can show the genuine row while the log is
+    verified and a forged one once it is in WAL mode; a trigger can rewrite rows as the
+    resumed run commits, or abort it mid-mission. A version 2 log must have exactly the
+    schema of `EventLog.create`; a version 1 log (never resumed with a key) at least no
+    view or trigger.
+    """
+    rows = _schema_of(db)
+    if version >= 2:
+        sound = tuple(rows) == _written_schema()
+    else:
+        sound = all(row[0] in ("table", "index") for row in rows)
+    if not sound:
+        raise EventLogError(
+            f"{path}: the log's tables are not the ones coral writes (a view, trigger, "
+            "index or altered table was added); the file was edited"
+        )
+
+
 def _is_real(value: object) -> TypeGuard[int | float]:
     """A number SQLite hands back for a REAL column (never a bool, text or blob)."""
     return isinstance(value, (int, float)) and not isinstance(value, bool)
@@ -611,6 +656,9 @@ class EventLog:
             path, timeout=_READ_TIMEOUT, isolation_level=None, check_same_thread=False
         )
         try:
+            # Nothing in the file itself may run code of its own: no function calls
+            # from its schema (views and triggers are refused outright, `_check_schema`).
+            db.execute("PRAGMA trusted_schema = OFF")
             if not writable:
                 db.execute("PRAGMA query_only = ON")
         except BaseException:
@@ -655,6 +703,7 @@ class EventLog:
                     f"{path}: the file is damaged (truncated or overwritten): "
                     + "; ".join(str(p) for p in problems)
                 )
+            _check_schema(db, path, version)
             auth = ", mac" if version >= 2 else ", NULL"
             row = db.execute(f"SELECT {HEADER_FIELDS}{auth} FROM header WHERE id = 1").fetchone()
         except sqlite3.Error as error:

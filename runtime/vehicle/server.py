@@ -54,12 +54,13 @@ import asyncio
 import contextlib
 import math
 import os
+import signal
 import socket
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Generic
+from typing import TYPE_CHECKING, Any, Generic
 
 from runtime.eventlog import EventLog, EventLogError, TelemetrySample
 from runtime.protocol import (
@@ -911,11 +912,21 @@ class VehicleServer(Generic[M]):
     def _on_make_safe(self, conn: _Connection, msg: MakeSafe) -> None:
         """Make the vehicle safe once per request id; acknowledge every time.
 
-        Why once: the controller re-sends its request after a reconnect, and a repeat must
-        not stop the vehicle's recovery a second time. The replies the stopped commands
+        Why once: a request id seen again (a controller that retries with the same id)
+        must not stop the vehicle's recovery a second time. The replies the stopped commands
         give go into the ledger before the acknowledgement, so they reach the controller
         (now, or on resume) like any other reply.
         """
+        make_safe = getattr(self.vehicle, "make_safe", None)
+        if make_safe is None:
+            # A plugin model written before make_safe joined VehicleModel: say so, and
+            # do not acknowledge what was not done (its watchdog still acts on silence).
+            self._record("make-safe", request_id=msg.request_id, reason=msg.reason, done=False)
+            self._log(
+                f"controller {conn.peer} asked the vehicle to make itself safe, but "
+                f"{type(self.vehicle).__name__} has no make_safe(); not acknowledged"
+            )
+            return
         first = msg.request_id not in self._made_safe
         self._made_safe.add(msg.request_id)
         self._record("make-safe", request_id=msg.request_id, reason=msg.reason, repeat=not first)
@@ -924,7 +935,7 @@ class VehicleServer(Generic[M]):
                 f"controller {conn.peer} asked the vehicle to make itself safe "
                 f"({msg.reason or 'no reason given'}); stopping every command"
             )
-            self._issue(self.vehicle.make_safe(msg.reason))
+            self._issue(make_safe(msg.reason))
             self._commit_record(force=True)
         conn.send(MakeSafeAck(msg.request_id, self.vehicle.time, first), self._clock())
 
@@ -1034,6 +1045,7 @@ def run_vehicle(
         An exit code: 0 after a clean stop (Ctrl-C included), 1 when the address cannot be
         bound, 2 for a bad key or speed; the reason goes to ``log``, never a traceback.
     """
+    previous = _sigterm_as_interrupt()
     try:
         asyncio.run(
             serve_vehicle(
@@ -1048,6 +1060,8 @@ def run_vehicle(
                 log=log,
             )
         )
+    except _Terminated:
+        log("stopped (SIGTERM)")
     except KeyboardInterrupt:
         log("stopped (Ctrl-C)")
     except ValueError as exc:
@@ -1056,4 +1070,25 @@ def run_vehicle(
     except OSError as exc:
         log(f"cannot listen on {host}:{port}: {exc}")
         return 1
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     return 0
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM (systemd, ``kill``), taken like Ctrl-C so the server stops the same way:
+    its ``finally`` blocks run and the vehicle's event log is committed and closed."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise _Terminated
+
+
+def _sigterm_as_interrupt() -> signal.Handlers | Callable[[int, Any], Any] | int | None:
+    """Make SIGTERM stop `run_vehicle` as Ctrl-C does; the handler it replaced (None
+    off the main thread, where handlers cannot be set)."""
+    try:
+        return signal.signal(signal.SIGTERM, _raise_terminated)
+    except ValueError:
+        return None

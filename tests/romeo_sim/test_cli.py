@@ -62,9 +62,14 @@ def test_help_says_to_prefer_the_key_file(capsys: pytest.CaptureFixture[str]) ->
     assert "prefer --key-file" in out and "--log FILE" in out
 
 
-def test_serve_writes_its_log_named_after_the_mission_id(tmp_path: Path, key: Path) -> None:
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_serve_writes_its_log_named_after_the_mission_id(
+    tmp_path: Path, key: Path, stop: signal.Signals
+) -> None:
     """A real ``romeo-sim serve --log``: nothing is written until a controller is adopted;
-    then the log's mission is its wire mission id, and the command is recorded."""
+    then the log's mission is its wire mission id, and the command is recorded. SIGTERM
+    (systemd, ``kill``) stops it as Ctrl-C does, the log committed and closed (the review
+    found it died with the last events unwritten)."""
     path = tmp_path / "vehicle.sqlite"
     vehicle = subprocess.Popen(
         [
@@ -89,9 +94,10 @@ def test_serve_writes_its_log_named_after_the_mission_id(tmp_path: Path, key: Pa
 
         asyncio.run(within(mission(), 10.0))
     finally:
-        vehicle.send_signal(signal.SIGINT)
+        vehicle.send_signal(stop)
         _, err = vehicle.communicate(timeout=15)
     assert vehicle.returncode == 0, err
+    assert ("stopped (SIGTERM)" if stop is signal.SIGTERM else "stopped (Ctrl-C)") in err
     with EventLog.open(path, mac_key=log_key(PSK)) as log:  # authenticated under the key
         assert (log.role, log.mission) == ("vehicle", "7")
         assert log.meta["mission_id"] == 7 and log.meta["speed"] == 20.0

@@ -246,8 +246,13 @@ def test_command_and_reply_frames_fit_the_paper_link(pool: tuple[Net, Certificat
     assert frame_size(Reply(1, 1, "timeout", 0.0)) < 60
 
 
+@pytest.mark.parametrize(
+    ("second_limit", "says"),
+    [(80.0, "the vehicle sent reply #19 "), (60.0, "re-sent none after #8")],
+    ids=["a-reply-skips-numbers", "nothing-left-to-resend"],
+)
 def test_a_log_that_lost_its_last_commits_ends_the_run_instead_of_hanging(
-    pool: tuple[Net, CertificateCheck], tmp_path: Path
+    pool: tuple[Net, CertificateCheck], tmp_path: Path, second_limit: float, says: str
 ) -> None:
     """The red team's truncated write-ahead log: the vehicle had acknowledgements the
     log no longer holds. The resumed controller must stop, saying so, not wait forever."""
@@ -290,7 +295,7 @@ def test_a_log_that_lost_its_last_commits_ends_the_run_instead_of_hanging(
             one = await first.run()
             log.close()
             shutil.copy(log_path, backup)  # what a truncated log will hold
-            second = resumed(80.0)
+            second = resumed(second_limit)
             two = await second.run()
             second.log.close()
             shutil.copy(backup, log_path)  # the commits of the second run are lost
@@ -306,7 +311,10 @@ def test_a_log_that_lost_its_last_commits_ends_the_run_instead_of_hanging(
     assert one.end is RunEnd.TIME_LIMIT and two.end is RunEnd.TIME_LIMIT
     assert two.replies > 0  # the vehicle got acknowledgements the backup does not have
     assert three.end is RunEnd.LOG_BEHIND
-    assert "lost its last commits" in three.detail
+    assert "lost its last commits" in three.detail and says in three.detail
+    # Within a heartbeat of the handshake, not whenever the vehicle's next reply comes:
+    # with nothing left to re-send, the resumed run used to wait for replies it had lost.
+    assert three.ended_at - three.started_at < 5.0, three.detail
     with EventLog.open(log_path) as log:
         assert log.count("log-behind") == 1
 
@@ -374,6 +382,7 @@ def stop_then_resume(
     second_stop_after: float | None = None,
     profile: str = "lan",
     start: float = 1682.6,
+    cut_after_stop: float | None = None,
 ) -> Stopped:
     """Run the pool mission in virtual time, stop it ``stop_at`` seconds in (as a signal
     would), then resume it from the log against the same vehicle."""
@@ -410,6 +419,13 @@ def stop_then_resume(
             loop.call_later(stop_at, first.request_stop, "SIGTERM")
             if second_stop_after is not None:
                 loop.call_later(stop_at + second_stop_after, first.request_stop, "SIGTERM")
+            if cut_after_stop is not None:  # a reset, with the make-safe request in flight
+
+                def cut() -> None:
+                    for conn in list(link._live):
+                        conn._cut()
+
+                loop.call_later(stop_at + cut_after_stop, cut)
             stopped = await first.run()
             log.close()
             second = Controller.resume(
@@ -488,6 +504,23 @@ def test_a_second_stop_gives_up_waiting_for_the_vehicle(
     assert run.stopped.end is RunEnd.STOPPED and run.stopped.made_safe is False
     assert run.stopped.stop_requests == 2
     assert run.stopped.mission_time < 120.5
+    assert run.resumed.end is RunEnd.FINAL
+
+
+def test_a_connection_lost_during_make_safe_is_replaced_within_the_same_budget(
+    pool: tuple[Net, CertificateCheck], tmp_path: Path
+) -> None:
+    """The review found that a reset with the request in flight gave up at once, leaving
+    the vehicle to its watchdog; now the request goes again on a new connection."""
+    net, approval = pool
+    run = stop_then_resume(net, approval, tmp_path, stop_at=120.0, cut_after_stop=1e-4)
+    assert run.stopped.end is RunEnd.STOPPED and run.stopped.made_safe is True
+    assert run.stopped.mission_time < 120.0 + ControllerOptions().make_safe_timeout
+    with EventLog.open(tmp_path / "controller.sqlite") as log:
+        kinds = [e.kind for e in log.events() if e.kind.startswith("make-safe")]
+    assert kinds == ["make-safe-sent", "make-safe-failed", "make-safe-sent", "make-safe-acked"]
+    with EventLog.open(tmp_path / "vehicle.sqlite") as vlog:
+        assert [e.data["repeat"] for e in vlog.events("make-safe")] == [False]
     assert run.resumed.end is RunEnd.FINAL
 
 

@@ -563,3 +563,28 @@ def test_with_no_route_to_the_vehicle_telemetry_listens_on_every_address(
     bound, log = asyncio.run(within(scenario()))
     assert bound == "0.0.0.0"
     assert log and "no route to 10.99.0.1" in log[0], log
+
+
+def test_a_telemetry_address_that_went_away_does_not_stop_reconnects() -> None:
+    """The review: connections leave from the telemetry address; when that address is no
+    longer this machine's (an interface went down), every reconnect used to fail with
+    "cannot assign requested address" and the vehicle was never reached again."""
+
+    async def scenario() -> tuple[str, list[str]]:
+        server = await asyncio.start_server(lambda r, w: None, "127.0.0.1", 0)
+        port = server.sockets[0].getsockname()[1]
+        log: list[str] = []
+        link = SocketLink("127.0.0.1", port, log=log.append)
+        link._local_host = "192.0.2.77"  # TEST-NET-1: never an address of this machine
+        try:
+            conn = await link.connect()
+            conn.close()
+            return str(link._local_host), log
+        finally:
+            await link.aclose()
+            server.close()
+            await server.wait_closed()
+
+    local, log = asyncio.run(within(scenario()))
+    assert local == "None"
+    assert any("192.0.2.77 is no longer an address of this machine" in line for line in log)

@@ -583,3 +583,39 @@ def test_an_unauthenticated_log_resumes_only_against_a_simulator_with_a_warning(
         ["--resume", str(log), *vehicle, "--verify", "--certificate", str(tmp_path / "c.json")]
     )
     assert code == 2 and "not authenticated" in capsys.readouterr().err
+
+
+# --- the schema itself: the chain authenticates rows, SQLite reads through the file's schema
+
+
+def _view_showing_a_forged_checkpoint_once_in_wal(db: sqlite3.Connection) -> None:
+    """The reviewer's attack: the genuine checkpoint while the log is verified (rollback
+    journal), a forged one once the writer has switched it to WAL."""
+    forged = '{"engine": {}, "mission_id": 1, "consumed": 99}'
+    db.execute("ALTER TABLE checkpoint RENAME TO checkpoint_real")
+    db.execute(
+        "CREATE VIEW checkpoint AS SELECT id, commits, event_seq, CASE WHEN "
+        "(SELECT journal_mode FROM pragma_journal_mode) = 'wal' "
+        f"THEN '{forged}' ELSE state END AS state FROM checkpoint_real"
+    )
+
+
+@pytest.mark.parametrize(
+    "edit",
+    [
+        _view_showing_a_forged_checkpoint_once_in_wal,
+        lambda db: db.execute(
+            "CREATE TRIGGER t AFTER INSERT ON events BEGIN DELETE FROM events; END"
+        ),
+        lambda db: db.execute("CREATE INDEX extra ON telemetry (x)"),
+        lambda db: db.execute("CREATE TABLE notes (text TEXT)"),
+    ],
+    ids=["view", "trigger", "index", "table"],
+)
+def test_a_log_whose_schema_was_edited_is_refused_before_any_row_is_read(
+    tmp_path: Path, edit: Edit
+) -> None:
+    path = edited(tmp_path, edit)
+    for writable, key in ((False, None), (False, KEY), (True, KEY)):
+        with pytest.raises(EventLogError, match="tables are not the ones coral writes"):
+            EventLog.open(path, writable=writable, mac_key=key)

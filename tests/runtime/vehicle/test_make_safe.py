@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import random
+from typing import cast
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -186,3 +187,41 @@ def test_the_server_makes_safe_once_per_request_id_and_acks_every_time() -> None
     replies = [m for m in got if isinstance(m, WireReply)]
     assert [(r.command_id, r.kind) for r in replies] == [(1, "error")]
     assert got.index(replies[0]) < got.index(acks[0])
+
+
+class OldModel(HandlerVehicle):
+    """A plugin model written before make_safe joined the VehicleModel contract."""
+
+    make_safe = None  # type: ignore[assignment]
+
+
+def test_a_model_without_make_safe_is_not_acknowledged_and_the_server_goes_on() -> None:
+    vehicle = OldModel(profile(), watchdog_s=1000.0)
+    lines: list[str] = []
+
+    async def main() -> list[StreamMessage | Rejected]:
+        loop = asyncio.get_running_loop()
+        model = cast(HandlerVehicle, vehicle)  # what a plugin's model looks like to the typer
+        server = VehicleServer(model, PSK, clock=loop.time, log=lines.append)
+        link = MemoryLink(server, None)
+        conn = await link.connect()
+        codec = StreamCodec(PSK, Role.CONTROLLER, random.Random(4).randbytes(NONCE_SIZE))
+        got: list[StreamMessage | Rejected] = []
+        try:
+            conn.write(codec.encode(Hello(codec.nonce, loop.time(), 5, False, 0, 0)))
+            while not any(isinstance(m, HelloReply) for m in got):
+                got.extend(codec.feed(await conn.read()))
+            conn.write(codec.encode(MakeSafe(21, loop.time(), "SIGTERM")))
+            conn.write(codec.encode(Heartbeat(loop.time())))
+            await asyncio.sleep(1.0)
+            while not any(isinstance(m, Heartbeat) for m in got):  # the server still serves
+                got.extend(codec.feed(await conn.read()))
+            return got
+        finally:
+            conn.close()
+            await link.aclose()
+            await server.stop()
+
+    got = run_virtual(main())
+    assert not any(isinstance(m, MakeSafeAck) for m in got)
+    assert any("has no make_safe(); not acknowledged" in line for line in lines)
