@@ -11,6 +11,9 @@ writes the event logs to ``--out`` and draws the timeline.
 
 ``coral-run timeline LOG...`` merges a controller log and a vehicle log and plots them.
 
+``coral-run watch LOG [--watch [HOST:]PORT]`` serves the mission's state as a web page,
+live from its log or replayed (`runtime.watch`).
+
 Ctrl-C (SIGINT) and SIGTERM end a run cleanly: no new command is sent, the vehicle is
 asked to make itself safe (``MakeSafe``, acknowledged within a few seconds), the log is
 committed, the plots drawn, and one message says which signal, the mission time, whether
@@ -250,11 +253,44 @@ def build_timeline_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _watch_address(text: str) -> tuple[str, int]:
+    from runtime.watch.main import parse_address
+
+    try:
+        return parse_address(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def build_watch_parser() -> argparse.ArgumentParser:
+    """The parser of ``coral-run watch``."""
+    parser = argparse.ArgumentParser(
+        prog="coral-run watch",
+        description="Serve a mission's state (marking, commands, telemetry, link) as a web "
+        "page from its controller log: live while the mission runs (the log is followed "
+        "until mission-end), a replay with a time scrubber once it has ended.",
+        epilog="exit codes: 0 stopped with Ctrl-C, 2 unreadable log or address. Bound to "
+        "127.0.0.1 by default; any other address (even 127.0.0.2) requires the access "
+        "token printed once in the URL",
+    )
+    parser.add_argument("log", metavar="LOG", type=Path, help="controller log (.sqlite)")
+    parser.add_argument(
+        "--watch",
+        metavar="[HOST:]PORT",
+        type=_watch_address,
+        default=("127.0.0.1", 8765),
+        help="where to serve (default 127.0.0.1:8765; port 0 picks a free one)",
+    )
+    return parser
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``coral-run``."""
     args = list(sys.argv[1:] if argv is None else argv)
     if args and args[0] == "timeline":
         return _timeline(build_timeline_parser().parse_args(args[1:]))
+    if args and args[0] == "watch":
+        return _watch(build_watch_parser().parse_args(args[1:]))
     if args and args[0] == "fuzz":
         from runtime.fuzz import main as fuzz_main
 
@@ -515,6 +551,16 @@ def _timeline(options: argparse.Namespace) -> int:
         print(f"coral-run: {exc}", file=sys.stderr)
         return EXIT_USAGE
     return EXIT_OK
+
+
+def _watch(options: argparse.Namespace) -> int:
+    from runtime.watch.main import watch
+
+    try:
+        return watch(options.log, *options.watch)
+    except CoralError as exc:
+        print(f"coral-run watch: {exc}", file=sys.stderr)
+        return EXIT_USAGE
 
 
 if __name__ == "__main__":

@@ -1,0 +1,1 @@
+"""Tests of runtime.watch: the state model, the server, the command."""

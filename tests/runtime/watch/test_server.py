@@ -1,0 +1,240 @@
+"""The watch server on a real socket (127.0.0.1, port 0): replay, live following over SSE,
+the token off loopback, the viewer limit, and a stalled viewer that costs no memory."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import tracemalloc
+from collections.abc import AsyncIterator, Awaitable, Callable
+from pathlib import Path
+
+import aiohttp
+
+from runtime.eventlog import EventLog
+from runtime.watch.server import Hub, Slot, Watch, WatchServer, needs_token
+from runtime.watch.source import LogReader
+from runtime.watch.state import snapshot_at
+
+NET = json.dumps(
+    {
+        "name": "n",
+        "places": [["a", 1, "mission", None, [], None, None]],
+        "transitions": [{"name": "go", "inputs": [["a", 1]], "outputs": [["b", 2]]}],
+    }
+)
+
+
+def run(test: Callable[[], Awaitable[None]]) -> None:
+    asyncio.run(asyncio.wait_for(test(), timeout=10))
+
+
+async def serving(watch: Watch, **options: object) -> WatchServer:
+    server = WatchServer(watch, port=0, **options)  # type: ignore[arg-type]
+    await server.start()
+    return server
+
+
+async def sse(response: aiohttp.ClientResponse) -> AsyncIterator[dict[str, object]]:
+    """The documents of an SSE stream, one per ``data:`` line."""
+    while line := await response.content.readline():
+        if line.startswith(b"data: "):
+            yield json.loads(line[len(b"data: ") :])
+
+
+def test_a_finished_log_is_replayed(pool_log: Path) -> None:
+    reader = LogReader(pool_log)
+    watch = Watch(reader)
+    watch.poll()
+
+    async def test() -> None:
+        server = await serving(watch)
+        assert server.token is None  # loopback: no token
+        base = server.url
+        try:
+            async with aiohttp.ClientSession() as client:
+                async with client.get(base) as page:
+                    assert page.status == 200
+                    html = await page.text()
+                assert "<script>" in html and "src=" not in html and "<link" not in html
+                for t in (0.0, 30.0, 100.0):
+                    async with client.get(f"{base}snapshot?t={t}") as reply:
+                        doc = await reply.json()
+                    expected = snapshot_at(reader.net_json, watch.events, watch.samples, t)
+                    assert doc["snapshot"] == json.loads(json.dumps(expected.to_json()))
+                    assert doc["live"] is False and doc["start"] == 0.0 and doc["end"] > 100
+                for bad in ("nan", "inf", "x"):
+                    async with client.get(f"{base}snapshot?t={bad}") as reply:
+                        assert reply.status == 400
+                async with client.get(f"{base}health") as reply:
+                    assert (await reply.json())["ok"] is True
+                async with client.post(f"{base}snapshot", data=b"x" * 10_000) as reply:
+                    assert reply.status in (405, 413)
+                long_header = {"X-Padding": "x" * 6000}  # under aiohttp's 8190, over ours
+                async with client.get(f"{base}health", headers=long_header) as reply:
+                    assert reply.status == 400
+        finally:
+            await server.stop()
+
+    try:
+        run(test)
+    finally:
+        reader.close()
+
+
+def test_a_live_log_is_followed_until_mission_end(tmp_path: Path) -> None:
+    path = tmp_path / "ctl.sqlite"
+    writer = EventLog.create(path, role="controller", mission="n", meta={}, net_json=NET)
+    writer.event(0.0, "mission-start", mission_id=1, marking={"a": 1})
+    writer.commit()
+    reader = LogReader(path)
+    watch = Watch(reader)
+    watch.poll()
+
+    async def test() -> None:
+        server = await serving(watch, poll_interval=0.02)
+        try:
+            async with (
+                aiohttp.ClientSession() as client,
+                client.get(f"{server.url}events") as stream,
+            ):
+                assert stream.headers["Content-Type"].startswith("text/event-stream")
+                documents = sse(stream)
+                first = await anext(documents)
+                assert first["snapshot"]["marking"] == {"a": 1}  # type: ignore[index]
+                assert first["live"] is True
+                writer.event(1.0, "fire", transition="go", command_id=None)
+                writer.commit()
+                second = await anext(documents)
+                assert second["snapshot"]["marking"] == {"b": 2}  # type: ignore[index]
+                writer.event(2.0, "mission-end", end="final", final=True, marking={"b": 2})
+                writer.commit()
+                third = await anext(documents)
+                assert third["live"] is False
+            assert server._follower is not None
+            await asyncio.wait_for(server._follower, 2)  # it stopped following by itself
+        finally:
+            await server.stop()
+
+    try:
+        run(test)
+    finally:
+        writer.close()
+        reader.close()
+
+
+def test_binding_off_loopback_needs_the_token(pool_log: Path) -> None:
+    assert not needs_token("127.0.0.1") and not needs_token("::1")
+    assert not needs_token("localhost")
+    assert needs_token("127.0.0.2") and needs_token("0.0.0.0") and needs_token("10.1.2.3")
+    reader = LogReader(pool_log)
+    watch = Watch(reader)
+
+    async def test() -> None:
+        server = WatchServer(watch, host="127.0.0.2", port=0)
+        await server.start()
+        token = server.token
+        assert token is not None and len(token) >= 40 and f"?token={token}" in server.url
+        base = f"http://127.0.0.2:{server.port}"
+        try:
+            async with aiohttp.ClientSession() as client:
+                for url, headers in (
+                    (f"{base}/health", {}),
+                    (f"{base}/snapshot?token=wrong", {}),
+                    (f"{base}/events?token={token[:-1]}", {}),
+                    (f"{base}/", {"Authorization": "Bearer nope"}),
+                ):
+                    async with client.get(url, headers=headers) as reply:
+                        assert reply.status == 401, url
+                async with client.get(f"{base}/health?token={token}") as reply:
+                    assert reply.status == 200
+                auth = {"Authorization": f"Bearer {token}"}
+                async with client.get(f"{base}/snapshot", headers=auth) as reply:
+                    assert reply.status == 200
+        finally:
+            await server.stop()
+
+    try:
+        run(test)
+    finally:
+        reader.close()
+
+
+def test_viewers_beyond_the_limit_get_503(pool_log: Path) -> None:
+    reader = LogReader(pool_log)
+    watch = Watch(reader)
+
+    async def test() -> None:
+        server = await serving(watch, max_viewers=1)
+        try:
+            async with aiohttp.ClientSession() as client, client.get(f"{server.url}events") as one:
+                await anext(sse(one))
+                async with client.get(f"{server.url}events") as two:
+                    assert two.status == 503
+                async with client.get(f"{server.url}health") as health:
+                    assert (await health.json())["viewers"] == 1
+        finally:
+            await server.stop()
+
+    try:
+        run(test)
+    finally:
+        reader.close()
+
+
+def test_a_slot_holds_only_the_newest_payload() -> None:
+    async def test() -> None:
+        slot = Slot()
+        for n in range(1000):
+            slot.put(str(n).encode())
+        assert slot.pending == b"999"
+        assert await slot.take() == b"999"
+        assert slot.pending is None
+        slot.close()
+        assert await slot.take() is None
+        hub = Hub(max_viewers=2)
+        assert hub.join() is not None and hub.join() is not None and hub.join() is None
+
+    run(test)
+
+
+def test_a_stalled_viewer_does_not_grow_memory(pool_log: Path) -> None:
+    """A client that never reads while 1,000 snapshots of 100 kB are published: if they
+    queued that would be 100 MB; the slot holds one, the socket buffers a bounded amount."""
+    reader = LogReader(pool_log)
+    watch = Watch(reader)
+
+    async def test() -> None:
+        server = await serving(watch)
+        stalled = socket.socket()
+        stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        stalled.setblocking(False)
+        try:
+            await asyncio.get_running_loop().sock_connect(stalled, ("127.0.0.1", server.port))
+            request = b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n"
+            await asyncio.get_running_loop().sock_sendall(stalled, request)
+            for _ in range(100):  # the handler has joined the hub
+                if server.hub.viewers:
+                    break
+                await asyncio.sleep(0.01)
+            assert server.hub.viewers == 1
+            tracemalloc.start()
+            before = tracemalloc.get_traced_memory()[0]
+            for n in range(1000):
+                server.hub.publish(n.to_bytes(4, "big") * 25_000)
+                await asyncio.sleep(0)
+            await asyncio.sleep(0.05)
+            grown = tracemalloc.get_traced_memory()[0] - before
+            tracemalloc.stop()
+            assert grown < 5_000_000, grown
+            [waiting] = server.hub.pending()
+            assert waiting is None or waiting[:4] == (999).to_bytes(4, "big")
+        finally:
+            stalled.close()
+            await server.stop()
+
+    try:
+        run(test)
+    finally:
+        reader.close()
