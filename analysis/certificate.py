@@ -532,6 +532,14 @@ def _check_signature(path: Path, data: Mapping[str, object], trusted: TrustStore
             f"{path}: malformed certificate: 'signature' must have algorithm \"{ALGORITHM}\" "
             f"and string key_id and value; {how}"
         )
+    # The signature block is outside what is signed: anything else in it is an edit
+    # nobody can vouch for (bench/redteam.py added a field and the run went ahead).
+    extra = sorted(set(signature) - {"algorithm", "key_id", "value"})
+    if extra:
+        raise CertificateError(
+            f"{path}: malformed certificate: 'signature' has fields no signer writes "
+            f"({', '.join(repr(k)[:40] for k in extra[:5])}); {how}"
+        )
     revoked = trusted.revocation(kid)
     if revoked is not None:
         raise CertificateError(

@@ -112,14 +112,16 @@ def certificate_gaps(net: Net, properties: Iterable[Mapping[str, object]]) -> li
 
 def final_rows(block: IntArray, finals: IntArray) -> BoolArray:
     """Which rows of ``block`` (markings) are among ``finals`` (full final markings)."""
-    if not finals.size:
+    if not finals.shape[0]:  # no final marking (with no places, one is empty yet counts)
         return np.zeros(block.shape[0], dtype=np.bool_)
     hits: BoolArray = (block[:, None, :] == finals[None, :, :]).all(axis=2).any(axis=1)
     return hits
 
 
 def _finals(net: Net) -> IntArray:
-    return np.array(net.final_markings(), dtype=np.int64).reshape(-1, len(net.places))
+    finals = net.final_markings()
+    # Explicit rows: with no places, reshape(-1, 0) cannot infer them (bench/redteam.py).
+    return np.array(finals, dtype=np.int64).reshape(len(finals), len(net.places))
 
 
 def non_final_dead_states(space: StateSpace) -> IntArray:
@@ -127,7 +129,7 @@ def non_final_dead_states(space: StateSpace) -> IntArray:
     state order (so by depth: the first has the shortest trace)."""
     dead = np.asarray(space.deadlocks, dtype=np.int64)
     finals = _finals(space.net)
-    if not dead.size or not finals.size:
+    if not dead.size or not finals.shape[0]:
         return dead
     keep = np.ones(dead.size, dtype=np.bool_)
     for start in range(0, dead.size, DEAD_CHUNK):

@@ -329,6 +329,18 @@ def _check_key(path: Path, key: bytes | None) -> bytes | None:
     return bytes(key)
 
 
+def _utf8_text(raw: bytes) -> str:
+    """Text columns as UTF-8, every other byte string a SQLite error: so a file edited to
+    hold invalid text is refused like any damage, with its name (bench/redteam.py found a
+    UnicodeDecodeError escaping ``PRAGMA quick_check`` on a flipped byte)."""
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise sqlite3.DataError(
+            "it holds text that is not UTF-8: the file is damaged or edited"
+        ) from None
+
+
 def _schema_of(db: sqlite3.Connection) -> list[tuple[Any, ...]]:
     return [
         tuple(row)
@@ -659,6 +671,7 @@ class EventLog:
             # Nothing in the file itself may run code of its own: no function calls
             # from its schema (views and triggers are refused outright, `_check_schema`).
             db.execute("PRAGMA trusted_schema = OFF")
+            db.text_factory = _utf8_text
             if not writable:
                 db.execute("PRAGMA query_only = ON")
         except BaseException:

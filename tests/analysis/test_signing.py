@@ -289,6 +289,22 @@ def test_content_edited_after_signing_is_refused(
     assert "edited after it was signed" in message
 
 
+def test_a_field_added_to_the_signature_block_is_refused(
+    tmp_path: Path, pool: tuple[Mission, Report], signing_key: TestKey
+) -> None:
+    """The block is outside the signed content, so the signature still verifies; an
+    extra field in it is an edit no signer made (found by bench/redteam.py)."""
+    mission, _ = pool
+    signed = sign_certificate(_certificate(pool), signing_key.key)
+    block = signed["signature"]
+    assert isinstance(block, dict)
+    block["key_id_extra"] = "x"
+    path = tmp_path / "c.json"
+    write_certificate(signed, path)
+    message = _refusal(mission, path, signing_key.trusted)
+    assert "'signature' has fields no signer writes ('key_id_extra')" in message
+
+
 def test_an_expired_certificate_is_refused(
     tmp_path: Path, pool: tuple[Mission, Report], signing_key: TestKey
 ) -> None:

@@ -658,3 +658,17 @@ def test_fair_components_agree_with_fair_sccs_and_both_search_paths_agree(net: N
             other = stategraph.shortest_path(n, graph.sources, graph.targets, start, goal)
         assert one is not None and other is not None and len(one) == len(other)
         assert len(one) == space.depth_of(goal_node)
+
+
+def test_a_mission_with_no_places_is_checked_not_crashed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """bench/redteam.py: a survey cut after its constants compiles to a net with no
+    places, and ``reshape(-1, 0)`` of its final markings raised ValueError."""
+    mission = tmp_path / "empty.coral"
+    mission.write_text("mission empty\nvehicle MINNOW\n\nconst A = 1.0 m\n", encoding="utf-8")
+    profile = Path(__file__).parents[2] / "examples" / "profiles" / "minnow.yaml"
+    code = main([str(mission), "--profile", str(profile), "--color", "never"])
+    out = capsys.readouterr()
+    assert code == 1 and "Traceback" not in out.err
+    assert "empty.coral: violated" in out.out  # no final marking is declared: stuck at once

@@ -602,3 +602,17 @@ def test_an_edited_telemetry_row_is_refused_by_name(tmp_path: Path) -> None:
         db.execute("UPDATE telemetry SET x = 'north' WHERE n = 1")
     with EventLog.open(path) as log, pytest.raises(EventLogError, match="telemetry row 1"):
         list(log.samples())
+
+
+def test_text_that_is_not_utf8_is_refused_as_damage_by_name(tmp_path: Path) -> None:
+    """bench/redteam.py: a flipped byte in a text column raised UnicodeDecodeError out of
+    the log's first check (``PRAGMA quick_check`` reports the bad row's text)."""
+    path = tmp_path / "controller.sqlite"
+    with EventLog.create(path, role="controller", mission="m", meta={}) as log:
+        log.event(1.0, "note", text="hello")
+        log.commit()
+    with sqlite3.connect(path) as db:
+        db.execute("UPDATE header SET mission = CAST(X'61E1' AS TEXT)")
+    with pytest.raises(EventLogError, match="not UTF-8") as caught, EventLog.open(path) as log:
+        list(log.events())
+    assert str(path) in str(caught.value)
