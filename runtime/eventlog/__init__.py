@@ -721,6 +721,10 @@ class EventLog:
             row = db.execute(f"SELECT {HEADER_FIELDS}{auth} FROM header WHERE id = 1").fetchone()
         except sqlite3.Error as error:
             raise _explain(path, "open the log" if writable else "read the log", error) from None
+        except UnicodeDecodeError:  # SQLite's own message quoted the damaged bytes
+            raise EventLogError(
+                f"{path}: the file is damaged or edited: it holds text that is not UTF-8"
+            ) from None
         if row is None:
             raise EventLogError(f"{path}: the header row is missing; the file is damaged")
         if row[0] != version:
@@ -1166,6 +1170,10 @@ class EventLog:
                 return [tuple(row) for row in db.execute(sql, params).fetchall()]
             except sqlite3.Error as error:
                 raise _explain(self.path, "read the log", error) from None
+            except UnicodeDecodeError:  # in SQLite's message about a damaged page
+                raise EventLogError(
+                    f"{self.path}: the file is damaged or edited: it holds text that is not UTF-8"
+                ) from None
 
     def _query_one(self, sql: str, params: tuple[object, ...] = ()) -> tuple[Any, ...] | None:
         rows = self._query_all(sql, params)

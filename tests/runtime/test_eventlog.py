@@ -616,3 +616,17 @@ def test_text_that_is_not_utf8_is_refused_as_damage_by_name(tmp_path: Path) -> N
     with pytest.raises(EventLogError, match="not UTF-8") as caught, EventLog.open(path) as log:
         list(log.events())
     assert str(path) in str(caught.value)
+
+
+def test_a_damaged_page_whose_sqlite_message_is_not_utf8_is_refused_by_name(
+    tmp_path: Path,
+) -> None:
+    """A real damaged log (tests/data/README.md): SQLite's integrity message about it is
+    not UTF-8, and decoding it used to raise out of the log's first check."""
+    import shutil
+
+    path = tmp_path / "vehicle.sqlite"
+    shutil.copy(REPO / "tests" / "data" / "eventlog" / "page_with_bad_utf8.sqlite", path)
+    with pytest.raises(EventLogError, match="not UTF-8") as caught:
+        EventLog.open(path)
+    assert str(caught.value).startswith(f"{path}: ")
