@@ -238,3 +238,32 @@ def test_a_bad_profile_file_is_an_input_error_naming_it(
     missing = tmp_path / "missing.yaml"
     assert main([str(POOL_MISSION), "--profile", str(missing), "--out", str(tmp_path)]) == 2
     assert f"{missing}: cannot read profile" in capsys.readouterr().err
+
+
+def test_include_path_lets_a_run_find_includes_elsewhere_and_is_recorded_for_resume(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The pool mission with its abort phase moved to a library folder: without
+    --include-path it does not compile (exit 2); with it, it runs, and the log records
+    the folder so that --resume compiles it the same way."""
+    import shutil
+
+    mission_dir, library = tmp_path / "mission", tmp_path / "library"
+    mission_dir.mkdir()
+    library.mkdir()
+    for source in POOL_MISSION.parent.glob("*.coral"):
+        shutil.copy(source, (library if source.name == "abort.coral" else mission_dir))
+    mission = mission_dir / POOL_MISSION.name
+    cert = tmp_path / "cert.json"
+    common = [str(mission), "--verify", "--certificate", str(cert), "--no-plots", "-q"]
+    assert main([*common, "--out", str(tmp_path / "without")]) == 2
+    assert "abort.coral" in capsys.readouterr().err
+    out = tmp_path / "run"
+    assert main([*common, "--include-path", str(library), "--out", str(out)]) == 0
+    with EventLog.open(out / "controller.sqlite") as log:
+        assert log.meta["include_path"] == [str(library.resolve())]
+    missing = tmp_path / "nowhere"
+    with pytest.raises(SystemExit) as exit_info:
+        main([*common, "--include-path", str(missing), "--out", str(tmp_path / "x")])
+    assert exit_info.value.code == 2
+    assert f"{missing}: no such folder" in capsys.readouterr().err
