@@ -144,33 +144,17 @@ def _serve(args: argparse.Namespace) -> int:
         print(f"romeo-sim: {exc}", file=sys.stderr)
         return 2
     from romeo_sim.vehicle import Vehicle
-    from runtime.eventlog import EventLogError, log_key
-    from runtime.vehicle.cli import VehicleLogFile
-    from runtime.vehicle.server import run_vehicle
+    from runtime.vehicle.cli import serve_with_log
 
-    event_log = None
-    if args.log is not None:
-        vehicle_file = None if args.vehicle is None else str(args.vehicle.resolve())
-        meta = {"seed": args.seed, "speed": args.speed, "vehicle": "ROMEO", "config": vehicle_file}
-        try:
-            event_log = VehicleLogFile(args.log, meta, mac_key=log_key(key))
-        except EventLogError as exc:
-            print(f"romeo-sim: {exc}", file=sys.stderr)
-            return 2
-    try:
-        return run_vehicle(
-            Vehicle(config, seed=args.seed),
-            key,
-            host=args.host,
-            port=args.port,
-            speed=args.speed,
-            duration=args.duration,
-            open_event_log=event_log,
-            log=lambda line: print(f"romeo-sim: {line}", file=sys.stderr, flush=True),
-        )
-    finally:
-        if event_log is not None:
-            event_log.close()
+    vehicle_file = None if args.vehicle is None else str(args.vehicle.resolve())
+    meta = {"seed": args.seed, "speed": args.speed, "vehicle": "ROMEO", "config": vehicle_file}
+    return serve_with_log(
+        Vehicle(config, seed=args.seed),
+        key,
+        args,
+        meta,
+        lambda line: print(f"romeo-sim: {line}", file=sys.stderr, flush=True),
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -18,7 +18,7 @@ import argparse
 import math
 import os
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -206,26 +206,43 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _serve(
     args: argparse.Namespace, key: bytes, profile: VehicleProfile, model: VehicleModel
 ) -> int:
-    from runtime.eventlog import log_key
-    from runtime.vehicle.server import run_vehicle
-
     def log(line: str) -> None:
         print(f"coral-vehicle: {line}", file=sys.stderr, flush=True)
 
+    meta = {
+        "seed": args.seed,
+        "speed": args.speed,
+        "profile": profile.file,
+        "vehicle": profile.name,
+    }
+    log(f"{profile.name} ({type(model).__name__}), speed {args.speed:g}")
+    return serve_with_log(model, key, args, meta, log)
+
+
+def serve_with_log(
+    model: VehicleModel,
+    key: bytes,
+    args: argparse.Namespace,
+    meta: Mapping[str, object],
+    log: Callable[[str], None],
+) -> int:
+    """`runtime.vehicle.server.run_vehicle` as a ``serve`` command runs it: with the
+    vehicle's own authenticated log when ``args.log`` names one (a `VehicleLogFile` with
+    ``meta``), closed after serving; an existing log file is exit 2, before serving.
+
+    ``args`` holds the ``serve`` options both ``coral-vehicle`` and ``romeo-sim`` have:
+    ``log``, ``host``, ``port``, ``speed``, ``duration``.
+    """
+    from runtime.eventlog import log_key
+    from runtime.vehicle.server import run_vehicle
+
     event_log = None
     if args.log is not None:
-        meta = {
-            "seed": args.seed,
-            "speed": args.speed,
-            "profile": profile.file,
-            "vehicle": profile.name,
-        }
         try:
             event_log = VehicleLogFile(args.log, meta, mac_key=log_key(key))
         except CoralError as exc:
             log(str(exc))
             return EXIT_USAGE
-    log(f"{profile.name} ({type(model).__name__}), speed {args.speed:g}")
     try:
         return run_vehicle(
             model,
