@@ -992,10 +992,12 @@ class EventLog:
         row = self._query_one("SELECT event_seq FROM checkpoint WHERE id = 1")
         return 0 if row is None else int(row[0])
 
-    def events(self, kinds: Collection[str] | None = None) -> Iterator[Event]:
+    def events(self, kinds: Collection[str] | None = None, *, after: int = 0) -> Iterator[Event]:
         """Committed events in the order they were written, optionally only some kinds.
 
-        ``kinds`` is a collection of kinds; a single string is taken as one kind.
+        ``kinds`` is a collection of kinds; a single string is taken as one kind. Only
+        events numbered above ``after`` are read: a reader following a running mission
+        asks for what was added since its last ``seq`` (`runtime.watch`).
         """
         if isinstance(kinds, str):
             kinds = [kinds]
@@ -1003,7 +1005,7 @@ class EventLog:
         if wanted is not None and not wanted:
             return
         where = "" if wanted is None else f" AND kind IN ({', '.join('?' * len(wanted))})"
-        last = 0
+        last = after
         while True:
             rows = self._query_all(
                 f"SELECT seq, time, kind, data FROM events WHERE seq > ?{where} "
@@ -1040,7 +1042,14 @@ class EventLog:
 
     def samples(self) -> Iterator[TelemetrySample]:
         """Committed telemetry samples in the order they were written."""
-        last = 0
+        for _, sample in self.numbered_samples():
+            yield sample
+
+    def numbered_samples(self, *, after: int = 0) -> Iterator[tuple[int, TelemetrySample]]:
+        """Committed telemetry samples numbered above ``after``, each with its row number
+        (``n``), in the order they were written: what a reader following a running
+        mission asks for since the last number it read."""
+        last = after
         nan = math.nan
         while True:
             rows = self._query_all(
@@ -1058,15 +1067,18 @@ class EventLog:
                         f"{self.path}: telemetry row {n} holds values of the wrong type; "
                         "the file is damaged or edited"
                     )
-                yield TelemetrySample(
-                    time,
-                    seq,
-                    nan if x is None else x,
-                    nan if y is None else y,
-                    nan if z is None else z,
-                    nan if psi is None else psi,
-                    est_x,
-                    est_y,
+                yield (
+                    n,
+                    TelemetrySample(
+                        time,
+                        seq,
+                        nan if x is None else x,
+                        nan if y is None else y,
+                        nan if z is None else z,
+                        nan if psi is None else psi,
+                        est_x,
+                        est_y,
+                    ),
                 )
             if len(rows) < _BATCH:
                 return
