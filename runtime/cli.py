@@ -31,20 +31,18 @@ shell's convention for "ended by a signal").
 from __future__ import annotations
 
 import argparse
-import contextlib
 import gc
 import shlex
 import signal
 import sys
-import threading
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from types import FrameType
 from typing import TYPE_CHECKING
 
 from coral_lang.diagnostics import CoralError
 from runtime.keys import TRUSTED_KEYS_HELP
 from runtime.vehicle.options import add_simulation_arguments, fault_plan_from_args
+from runtime.vehicle.sigterm import Terminated, sigterm_raises
 
 if TYPE_CHECKING:
     from runtime.controller import RunResult
@@ -64,30 +62,6 @@ EXIT_CODES_HELP = (
     "for its acknowledgement), logs and plots are written, and the message gives the "
     "'coral-run --resume LOG' command; a second signal ends at once"
 )
-
-
-class _Terminated(KeyboardInterrupt):
-    """SIGTERM outside the run itself (while compiling, verifying, plotting): like Ctrl-C's
-    KeyboardInterrupt (a subclass, so asyncio lets it through at once as it does Ctrl-C),
-    it ends with a message and exit 143 rather than silently."""
-
-
-def _raise_terminated(signum: int, frame: FrameType | None) -> None:
-    raise _Terminated
-
-
-@contextlib.contextmanager
-def _sigterm_raises() -> Iterator[None]:
-    """SIGTERM raises `_Terminated` while ``coral-run`` works (main thread only); the run
-    itself installs its own handlers on its event loop (runtime.run)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGTERM, _raise_terminated)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def _host_port(text: str) -> tuple[str, int]:
@@ -313,7 +287,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from runtime.engine import EngineSpin
 
     try:
-        with _sigterm_raises():
+        with sigterm_raises():
             return _run(options)
     except EngineSpin as exc:  # the controller ends a run on a spin; this is a safety net
         print(f"coral-run: mission failed: {exc}", file=sys.stderr)
@@ -321,7 +295,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CoralError as exc:
         print(f"coral-run: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except _Terminated:
+    except Terminated:
         _interrupted("SIGTERM", options)
         return EXIT_SIGTERM
     except KeyboardInterrupt:

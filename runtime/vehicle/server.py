@@ -54,13 +54,12 @@ import asyncio
 import contextlib
 import math
 import os
-import signal
 import socket
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Generic
+from typing import TYPE_CHECKING, Generic
 
 from runtime.eventlog import EventLog, EventLogError, TelemetrySample
 from runtime.protocol import (
@@ -85,6 +84,7 @@ from runtime.protocol import (
     encode_datagram,
 )
 from runtime.vehicle.model import Reply, TelemetrySnapshot, VehicleModel
+from runtime.vehicle.sigterm import Terminated, sigterm_raises
 
 __all__ = ["ServerStats", "VehicleServer", "run_vehicle", "serve_vehicle"]
 
@@ -1045,22 +1045,22 @@ def run_vehicle(
         An exit code: 0 after a clean stop (Ctrl-C included), 1 when the address cannot be
         bound, 2 for a bad key or speed; the reason goes to ``log``, never a traceback.
     """
-    previous = _sigterm_as_interrupt()
     try:
-        asyncio.run(
-            serve_vehicle(
-                model,
-                psk,
-                host=host,
-                port=port,
-                speed=speed,
-                duration=duration,
-                event_log=event_log,
-                open_event_log=open_event_log,
-                log=log,
+        with sigterm_raises():
+            asyncio.run(
+                serve_vehicle(
+                    model,
+                    psk,
+                    host=host,
+                    port=port,
+                    speed=speed,
+                    duration=duration,
+                    event_log=event_log,
+                    open_event_log=open_event_log,
+                    log=log,
+                )
             )
-        )
-    except _Terminated:
+    except Terminated:
         log("stopped (SIGTERM)")
     except KeyboardInterrupt:
         log("stopped (Ctrl-C)")
@@ -1070,25 +1070,4 @@ def run_vehicle(
     except OSError as exc:
         log(f"cannot listen on {host}:{port}: {exc}")
         return 1
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
     return 0
-
-
-class _Terminated(KeyboardInterrupt):
-    """SIGTERM (systemd, ``kill``), taken like Ctrl-C so the server stops the same way:
-    its ``finally`` blocks run and the vehicle's event log is committed and closed."""
-
-
-def _raise_terminated(signum: int, frame: object) -> None:
-    raise _Terminated
-
-
-def _sigterm_as_interrupt() -> signal.Handlers | Callable[[int, Any], Any] | int | None:
-    """Make SIGTERM stop `run_vehicle` as Ctrl-C does; the handler it replaced (None
-    off the main thread, where handlers cannot be set)."""
-    try:
-        return signal.signal(signal.SIGTERM, _raise_terminated)
-    except ValueError:
-        return None
