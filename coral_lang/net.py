@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import enum
 import hashlib
+import itertools
 import json
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -30,17 +31,24 @@ class PlaceKind(enum.Enum):
     MISSION = "mission"  # declared by the mission author (or any PNML place)
     PENDING = "pending"  # a command is in flight, awaiting the vehicle's reply
     COMPLEMENT = "complement"  # free room of a capacity-bounded place
+    ARMED = "armed"  # 1 while the operator may still give an input (see `TransitionKind.INPUT`)
 
 
 class TransitionKind(enum.Enum):
-    """Who fires a transition: the engine (plain, command) or the vehicle (reply)."""
+    """Who fires a transition: the engine (plain, command), the vehicle (reply) or the
+    operator (input)."""
 
     PLAIN = "plain"  # wait/signal only
     COMMAND = "command"  # sends a vehicle command, marks its pending place
     REPLY = "reply"  # the vehicle answered; an environment transition for analysis
+    INPUT = "input"  # the operator gave an input: an environment transition, once per run,
+    # offered only while the run is on (some engine or reply transition can fire)
 
 
 Value = float | int | str
+
+MAX_INPUTS = 8
+"""Operator inputs one mission may declare: each doubles the markings a final stands for."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +87,7 @@ class Place:
     resources: tuple[str, ...] = ()
     pending_of: str | None = None
     complement_of: str | None = None
+    armed_of: str | None = None
 
 
 @dataclass(frozen=True)
@@ -87,7 +96,8 @@ class Transition:
 
     A COMMAND transition carries its `Command` and its ``pending`` place; a REPLY
     transition names the command transition it answers (``reply_to``) and the reply
-    kind (``reply``, e.g. ``"timeout"``).
+    kind (``reply``, e.g. ``"timeout"``); an INPUT transition names the input place the
+    operator marks (``operator_input``).
     """
 
     name: str
@@ -101,9 +111,12 @@ class Transition:
     pending: str | None = None
     reply_to: str | None = None
     reply: str | None = None
+    operator_input: str | None = None
 
     def describe(self) -> str:
         """One line a person understands, e.g. ``check_depth: DEPTH? replied timeout``."""
+        if self.kind is TransitionKind.INPUT and self.operator_input is not None:
+            return f"the operator gives input {self.operator_input}"
         if self.kind is TransitionKind.REPLY and self.reply_to is not None:
             return f"{self.reply_to}: {self.label or '?'} replied {self.reply}"
         if self.command is not None:
@@ -113,8 +126,9 @@ class Transition:
 
 @dataclass(frozen=True)
 class FinalMarking:
-    """A declared proper end: exactly ``tokens`` in those places, every other
-    non-complement place empty."""
+    """A declared proper end: exactly ``tokens`` in those places, every other place
+    empty except complement places (their free room) and armed places (an input the
+    operator did not give is no obstacle to ending)."""
 
     tokens: tuple[tuple[str, int], ...]
     span: Span | None = None
@@ -280,7 +294,12 @@ class Net:
         return {p.name: m for p, m in zip(self.places, marking, strict=True) if m}
 
     def final_markings(self) -> list[tuple[int, ...]]:
-        """Declared finals as full markings; complement places hold their free room."""
+        """Declared finals as full markings; complement places hold their free room, and
+        each armed place is 1 or 0 (input not given, or given and consumed): a final with
+        k inputs stands for 2**k markings, so k is at most `MAX_INPUTS`."""
+        armed = [i for i, p in enumerate(self.places) if p.kind is PlaceKind.ARMED]
+        if len(armed) > MAX_INPUTS:
+            raise NetError(f"{len(armed)} operator inputs; at most {MAX_INPUTS} are supported")
         result = []
         for final in self.finals:
             values = list(self.marking_from(final.tokens))
@@ -289,12 +308,43 @@ class Net:
                     base = self.place(place.complement_of)
                     assert base.capacity is not None
                     values[i] = base.capacity - values[self._place_index[base.name]]
-            result.append(tuple(values))
+            for given in itertools.product((1, 0), repeat=len(armed)):
+                for i, value in zip(armed, given, strict=True):
+                    values[i] = value
+                result.append(tuple(values))
         return result
 
     def is_final(self, marking: Iterable[int]) -> bool:
         """Whether ``marking`` is one of the declared final markings."""
         return tuple(marking) in set(self.final_markings())
+
+    # -- operator inputs ------------------------------------------------------------------
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """The operator inputs the mission declares (their input places), in net order."""
+        return tuple(
+            t.operator_input
+            for t in self.transitions
+            if t.kind is TransitionKind.INPUT and t.operator_input is not None
+        )
+
+    def input_transition(self, name: str) -> Transition:
+        """The transition by which the operator gives input ``name``; KeyError if the
+        mission declares no such input."""
+        for t in self.transitions:
+            if t.kind is TransitionKind.INPUT and t.operator_input == name:
+                return t
+        raise KeyError(name)
+
+    def runs_on(self, marking: tuple[int, ...]) -> bool:
+        """Whether a run in ``marking`` goes on: some engine or reply transition is
+        enabled. Operator inputs do not keep a run alive, and are offered only while it
+        is on; a marking where the run stops is final or a deadlock."""
+        return any(
+            t.kind is not TransitionKind.INPUT and self.enabled(marking, t)
+            for t in self.transitions
+        )
 
     def enabled(self, marking: tuple[int, ...], transition: Transition) -> bool:
         """Whether ``transition`` may fire in ``marking`` (the reference rule)."""
@@ -342,6 +392,8 @@ class Net:
                     list(p.resources),
                     p.pending_of,
                     p.complement_of,
+                    # Only when present, so nets without inputs keep their digests.
+                    *([p.armed_of] if p.armed_of is not None else []),
                 ]
                 for p in sorted(self.places, key=lambda p: p.name)
             ],
@@ -364,6 +416,7 @@ class Net:
                     "pending": t.pending,
                     "reply_to": t.reply_to,
                     "reply": t.reply,
+                    **({"operator_input": t.operator_input} if t.operator_input else {}),
                 }
                 for t in sorted(self.transitions, key=lambda t: t.name)
             ],
