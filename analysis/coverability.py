@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from analysis.inputs import legal_trace
 from coral_lang.net import Net
 
 Marking = tuple[int, ...]
@@ -349,6 +350,12 @@ def replay_pump(
 
 
 def _trace(net: Net, place: int, prefix: Sequence[int], loop: Sequence[int]) -> PumpingTrace | None:
+    # An operator input fires once and only while the run is on (analysis.inputs): the
+    # loop never holds one, and the prefix is reordered so that each fires in time.
+    legal = legal_trace(net, prefix)
+    if legal is None:
+        return None
+    prefix = legal
     checked = replay_pump(net, prefix, loop, place)
     if checked is None:
         return None

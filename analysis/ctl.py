@@ -66,7 +66,7 @@ from coral_lang.formula import (
     children,
     is_ctl,
 )
-from coral_lang.net import Net
+from coral_lang.net import Net, TransitionKind
 
 __all__ = [
     "CtlChecker",
@@ -101,6 +101,7 @@ class NetIndex:
         self.net = net
         self.place = {p.name: i for i, p in enumerate(net.places)}
         self.transition = {t.name: i for i, t in enumerate(net.transitions)}
+        self.operator = [t.kind is TransitionKind.INPUT for t in net.transitions]
         self.presets: list[tuple[IntArray, IntArray]] = []
         for t in net.transitions:
             cols = np.asarray([self.place[p] for p, _ in t.inputs], dtype=np.int64)
@@ -164,7 +165,15 @@ class StateEvaluator:
         self._atoms: dict[Formula, BoolArray] = {}
 
     def enabled(self, t: int) -> BoolArray:
-        """Markings where transition ``t`` is enabled."""
+        """Markings where transition ``t`` may fire: its preset is covered (and, for an
+        operator input, the run is on there: the marking is not dead)."""
+        hit = self._preset_holds(t)
+        if self.index.operator[t]:
+            hit = hit & ~self.dead
+        return hit
+
+    def _preset_holds(self, t: int) -> BoolArray:
+        """Markings that cover the preset of transition ``t``."""
         hit = self._enabled.get(t)
         if hit is None:
             cols, weights = self.index.presets[t]
@@ -176,11 +185,13 @@ class StateEvaluator:
 
     @property
     def dead(self) -> BoolArray:
-        """Markings that enable no transition."""
+        """Markings that enable no transition (on a net with operator inputs: no
+        transition but inputs, see `analysis.inputs`)."""
         if self._dead is None:
             live = np.zeros(self.n, dtype=np.bool_)
             for t in range(len(self.index.presets)):
-                live |= self.enabled(t)
+                if not self.index.operator[t]:
+                    live |= self._preset_holds(t)
             self._dead = ~live
         return self._dead
 

@@ -10,6 +10,9 @@ can happen are the *weakly fair* runs of the net for these groups:
 * each command's replies together: while the command is in flight (its pending place
   is marked, so its replies are enabled) one of them is eventually taken.
 
+Operator inputs carry no obligation: the operator may never act, so a run that leaves
+an input enabled forever is still a run the runtime can produce.
+
 Properties such as "every run ends in a final marking" and the temporal assertions
 of a mission are decided over these runs only; ``docs/verify.md`` spells this out.
 A net without commands (a PNML model) gets one group per transition: plain weak
@@ -34,9 +37,10 @@ def group_of_transition(net: Net) -> IntArray:
     """The fairness group of each transition of ``net`` (see module): groups ``0 ..
     E-1`` are the engine transitions in net order, one each; then one group per
     command, holding its replies, in the order of the command's first reply; ``-1`` for
-    a reply that answers no command (no fairness constraint)."""
+    a reply that answers no command and for an operator input (no fairness constraint)."""
     out = np.full(len(net.transitions), -1, dtype=np.int64)
-    engine = [i for i, tr in enumerate(net.transitions) if tr.kind is not TransitionKind.REPLY]
+    environment = (TransitionKind.REPLY, TransitionKind.INPUT)
+    engine = [i for i, tr in enumerate(net.transitions) if tr.kind not in environment]
     out[engine] = np.arange(len(engine))
     commands: dict[str, int] = {}
     for i, tr in enumerate(net.transitions):

@@ -61,6 +61,7 @@ RULES: dict[str, Rule] = {
             Severity.WARNING,
             "suppression comment without a reason or for an unknown rule",
         ),
+        Rule("CORAL209", Severity.WARNING, "operator input no transition waits on"),
     )
 }
 
@@ -211,10 +212,23 @@ def _place_usage(net: Net) -> Iterator[Diagnostic]:
     in_finals = {p for f in net.finals for p, _ in f.tokens}
     in_asserts = {p for a in net.assertions for p, _ in a.places}
     in_asserts.update(p for a in net.assertions if a.formula for p in places_of(a.formula))
+    inputs = set(net.inputs)
     for place in net.places:
         if place.kind is not PlaceKind.MISSION:
             continue
         name = place.name
+        if name in inputs:
+            # Only the operator marks it: CORAL203-205 do not fit, CORAL209 does.
+            if name not in consumed:
+                yield _finding(
+                    "CORAL209",
+                    f"operator input '{name}' is declared but no transition waits on it: "
+                    "the operator's action would have no effect",
+                    place.span,
+                    f"add a transition that waits on '{name}' (e.g. to take the abort "
+                    "path), or remove the input",
+                )
+            continue
         marked = place.initial > 0 or name in produced
         if name not in consumed and name not in produced and name not in in_finals | in_asserts:
             if place.initial == 0:

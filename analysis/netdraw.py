@@ -225,6 +225,8 @@ def _write_element(element: Element, net: Net, out: list[str]) -> None:
 
 # -- built-in layout ------------------------------------------------------------------
 
+OPERATOR_FILL = "#fff2b3"
+"""Fill of operator inputs and their armed places (the operator moves those tokens)."""
 _R = 16.0  # place radius
 _ROW = 64.0  # vertical slot of a node
 _GAP = 70.0  # between columns
@@ -346,11 +348,12 @@ def _builtin_svg(net: Net) -> str:
             dash = ' stroke-dasharray="4 3"'
         elif place.kind is PlaceKind.COMPLEMENT:
             dash = ' stroke-dasharray="1 3"'
+        fill = OPERATOR_FILL if place.kind is PlaceKind.ARMED else "white"
         shown = html.escape(_label(place.name, _MAX_NAME), quote=False)
         parts.append(
             f'<g class="place" data-node="p{i}"><title>{html.escape(place.name, quote=False)} '
             f"[{place.kind.value}]</title>"
-            f'<circle cx="{cx:.1f}" cy="{cy:.1f}" r="{_R:g}" fill="white" stroke="black"{dash}/>'
+            f'<circle cx="{cx:.1f}" cy="{cy:.1f}" r="{_R:g}" fill="{fill}" stroke="black"{dash}/>'
             f'<text class="tokens" x="{cx:.1f}" y="{cy + 4:.1f}" text-anchor="middle" '
             f'font-size="11">{token_text(place.initial)}</text>'
             f'<text class="name" x="{cx:.1f}" y="{cy + _R + 12:.1f}" text-anchor="middle" '
@@ -360,13 +363,14 @@ def _builtin_svg(net: Net) -> str:
         cx, cy = centre[("t", i)]
         w = width_of[("t", i)]
         rounded = ' rx="8"' if tr.kind is TransitionKind.REPLY else ""
+        fill = OPERATOR_FILL if tr.kind is TransitionKind.INPUT else "white"
         label = html.escape(_label(tr.describe(), _MAX_LABEL), quote=False)
         priority = f" [priority {tr.priority}]" if tr.priority else ""
         parts.append(
             f'<g class="transition" data-node="t{i}"><title>'
             f"{html.escape(tr.describe() + priority, quote=False)} [{tr.kind.value}]</title>"
             f'<rect x="{cx - w / 2:.1f}" y="{cy - _BOX_H / 2:.1f}" width="{w:.1f}" '
-            f'height="{_BOX_H:g}"{rounded} fill="white" stroke="black"/>'
+            f'height="{_BOX_H:g}"{rounded} fill="{fill}" stroke="black"/>'
             f'<text x="{cx:.1f}" y="{cy + 4:.1f}" text-anchor="middle" font-size="11">'
             f"{label}</text></g>"
         )

@@ -27,10 +27,11 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar, Literal
 
+from analysis.inputs import legal_trace
 from analysis.invariants import InvariantBasis
 from analysis.siphons import maximal_trap
 from analysis.structural import DEFAULT_TIMEOUT_MS, TooLargeForStructure, incidence
-from coral_lang.net import Net
+from coral_lang.net import Net, Transition, TransitionKind
 
 if TYPE_CHECKING:
     import z3  # imported where a query runs: it takes about 50 ms to load
@@ -88,7 +89,8 @@ class BadMarkings:
 
     Attributes:
         constraints: A conjunction of linear place constraints (empty: no restriction).
-        dead: Also require that no transition is enabled.
+        dead: Also require that no transition is enabled (operator inputs aside: a
+            marking where only inputs are enabled is terminal, hence dead).
         exclude: Full markings (aligned with `Net.places`) that are not bad, e.g. the
             declared final markings when looking for unexpected deadlocks.
         label: How a report names this set, e.g. ``"a and b marked together"``.
@@ -105,7 +107,7 @@ class BadMarkings:
             return False
         if not all(c.holds(net, marking) for c in self.constraints):
             return False
-        return not (self.dead and any(net.enabled(marking, t) for t in net.transitions))
+        return not (self.dead and any(net.enabled(marking, t) for t in _engine(net)))
 
     def describe(self) -> str:
         """The label, or the constraints spelled out."""
@@ -330,7 +332,9 @@ def realise(net: Net, candidate: Candidate, max_nodes: int = 100_000) -> tuple[i
     while stack and len(tried) < max_nodes:
         marking, remaining, sequence = stack.pop()
         if not any(remaining):
-            return sequence
+            # Operator inputs fire while the run is on (analysis.inputs).
+            legal = legal_trace(net, sequence)
+            return None if legal is None else tuple(legal)
         if remaining in tried:
             continue
         tried.add(remaining)
@@ -368,13 +372,20 @@ def _equation(
             lhs >= c.bound if c.op == ">=" else lhs <= c.bound if c.op == "<=" else lhs == c.bound
         )
     if bad.dead:
-        for tr in net.transitions:
+        for tr in _engine(net):
             # Disabled: some input place holds fewer tokens than the arc needs. A
             # transition without inputs is always enabled, so Or([]) = False is right.
             solver.add(z3.Or([marking[net.place_index(p)] < w for p, w in tr.inputs]))
     for final in bad.exclude:
         solver.add(z3.Or([v != k for v, k in zip(marking, final, strict=True)]))
     return solver, marking, counts
+
+
+def _engine(net: Net) -> list[Transition]:
+    """The transitions whose being disabled makes a marking dead: all but operator
+    inputs (a marking where only inputs are enabled is terminal, see
+    `analysis.inputs`)."""
+    return [t for t in net.transitions if t.kind is not TransitionKind.INPUT]
 
 
 def _violated_trap(net: Net, marking: Marking) -> tuple[str, ...] | None:

@@ -7,7 +7,9 @@ them: counting and reachability questions never need them. Temporal properties d
 the enabled transitions, adds each one's key delta to the marking's packed key and
 looks the successor up in a hash set of all keys. The result is compressed sparse
 rows (``indptr``, ``targets``, ``labels``), 12 bytes per edge, in which every
-(marking, enabled transition) pair is one edge, as the MCC counts them.
+(marking, enabled transition) pair is one edge, as the MCC counts them, except that an
+operator input has no edge out of a terminal marking (`analysis.inputs`: the run has
+stopped there), so the graph's dead nodes are the terminal markings.
 
 The algorithms below work on plain arrays so the LTL product graph can use them too:
 
@@ -37,6 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from analysis.encoding import KeyStore
+from analysis.inputs import input_flags
 from analysis.statespace import StateSpace
 
 IntArray = npt.NDArray[np.int64]
@@ -94,7 +97,7 @@ class StateGraph:
 
     @cached_property
     def dead(self) -> BoolArray:
-        """Nodes with no enabled transition."""
+        """Nodes with no enabled transition (terminal ones, on a net with inputs)."""
         flags: BoolArray = np.diff(self.indptr) == 0
         return flags
 
@@ -148,6 +151,8 @@ def build_graph(
 
     cn = CompactNet.from_net(space.net)
     n, n_t = space.states, cn.n_transitions
+    operator = np.flatnonzero(input_flags(space.net))
+    engine = np.flatnonzero(~input_flags(space.net))
     keys = np.ascontiguousarray(space.keys[:n])
     store = KeyStore.of(keys, wide_index=n >= 1 << 31)
     delta = space.layout.key_deltas(cn.effects)
@@ -166,6 +171,11 @@ def build_graph(
                 continue
             ok = (block[:, group.places] >= group.weights).all(axis=2)
             enabled[:, group.transitions] = ok
+        if operator.size:
+            # The run has stopped where no engine or reply transition is enabled: the
+            # operator can no longer act there (analysis.inputs).
+            stopped = ~enabled[:, engine].any(axis=1)
+            enabled[np.ix_(stopped, operator)] = False
         rows, trans = np.nonzero(enabled)
         nodes = rows.astype(np.int64) + first
         succ_keys = keys[nodes] + delta[trans]

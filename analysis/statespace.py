@@ -48,7 +48,7 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -68,6 +68,7 @@ from analysis.encoding import (
     one_hot_components,
     row_dtype,
 )
+from analysis.inputs import has_inputs, input_edges_at, legal_trace, terminal_rows
 from analysis.progress import ProgressCallback, ProgressInfo
 from analysis.stubborn import StubbornSets
 from coral_lang.net import Net
@@ -109,8 +110,10 @@ class StateSpace:
         place_bounds: most tokens each place held in any stored marking.
         max_tokens_place: ``max(place_bounds)``.
         max_tokens_marking: most tokens in one stored marking.
-        deadlocks: numbers of all dead states found (no transition enabled), ascending,
-            so ``deadlocks[0]`` has the shortest trace.
+        deadlocks: numbers of all dead states found (no transition enabled; on a net
+            with operator inputs, every *terminal* state: no transition but inputs
+            enabled, see `analysis.inputs`), ascending, so ``deadlocks[0]`` has the
+            shortest trace.
         fired_transitions: ``fired_transitions[t]`` is whether ``t`` is enabled in some
             stored marking. With ``por`` this under-approximates (reduced graph).
         complete: whether every reachable marking was stored.
@@ -218,12 +221,19 @@ class StateSpace:
 
     def trace_to(self, index: int) -> list[int]:
         """Transition indices of a shortest firing sequence from the initial marking to
-        state ``index`` (shortest in the reduced graph when ``reduced``)."""
+        state ``index`` (shortest in the reduced graph when ``reduced``). On a net with
+        operator inputs every input in it fires while the run is on
+        (`analysis.inputs.legal_trace`)."""
         path: list[int] = []
         while index > 0:
             path.append(int(self.via[index]))
             index = int(self.parents[index])
-        return path[::-1]
+        path.reverse()
+        if has_inputs(self.net):
+            legal = legal_trace(self.net, path)
+            assert legal is not None, "a state space with inputs starts from a live marking"
+            return legal
+        return path
 
     def trace_names(self, index: int) -> list[str]:
         """`trace_to` as transition names."""
@@ -590,6 +600,7 @@ class _Explorer:
         progress: ProgressCallback | None,
         chunk: int,
         clock: Clock,
+        sleep_sets: bool = True,
     ) -> None:
         self.cn = cn
         self.max_states = max_states
@@ -633,7 +644,8 @@ class _Explorer:
         self.edges = 0
         self.layer_starts = [0]
         self.stopped: str | None = None
-        self.sleep = SleepSets(cn) if reducer is None and cn.n_transitions > 1 else None
+        wanted = sleep_sets and reducer is None and cn.n_transitions > 1
+        self.sleep = SleepSets(cn) if wanted else None
         self.sleep_next = False  # whether this layer computes the next one's sleep sets
         self.next_sleep: list[npt.NDArray[np.uint64]] = []
 
@@ -1371,14 +1383,116 @@ def explore(
     Returns:
         The `StateSpace`; ``complete`` is false, with ``stopped_reason``, when a budget
         or ``stop_when`` stopped it.
+
+    A net with operator inputs (`analysis.inputs`) is explored without partial-order
+    reduction (``por`` is ignored, and sleep sets are off too): the reductions preserve
+    P/T deadlocks, while its dead states are the terminal ones, found by a pass over
+    every stored marking after the search. When its initial marking is itself terminal
+    the run never starts: the space is that one marking.
     """
     cn = net if isinstance(net, CompactNet) else CompactNet.from_net(net)
+    if has_inputs(cn.net):
+        return _explore_with_inputs(
+            cn,
+            max_states=max_states,
+            time_limit=time_limit,
+            progress=progress,
+            chunk=chunk,
+            clock=clock,
+            stop_when=stop_when,
+        )
+    return _explore(
+        cn,
+        max_states=max_states,
+        time_limit=time_limit,
+        por=por,
+        visible=visible,
+        progress=progress,
+        chunk=chunk,
+        clock=clock,
+        stop_when=stop_when,
+    )
+
+
+def _explore_with_inputs(
+    cn: CompactNet,
+    *,
+    max_states: int | None,
+    time_limit: float | None,
+    progress: ProgressCallback | None,
+    chunk: int,
+    clock: Clock,
+    stop_when: StopWhen | None,
+) -> StateSpace:
+    """`explore` for a net with operator inputs: unreduced P/T search, then the dead
+    states recomputed as the terminal ones and the input edges out of them uncounted."""
+    net = cn.net
+    initial = net.initial_marking()
+    if not net.runs_on(initial):
+        # Only the initial marking is reachable: stop the search at its first successor.
+        space = _explore(cn, max_states=1, time_limit=time_limit, clock=clock, sleep_sets=False)
+        return replace(
+            space,
+            states=1,
+            edges=0,
+            place_bounds=np.asarray(initial, dtype=np.int64),
+            max_tokens_place=max(initial, default=0),
+            max_tokens_marking=sum(initial),
+            deadlocks=np.zeros(1, dtype=np.int64),
+            fired_transitions=np.zeros(len(net.transitions), dtype=np.bool_),
+            complete=True,
+            stopped_reason=None,
+            depth=1,
+            keys=space.keys[:1],
+            parents=space.parents[:1],
+            via=space.via[:1],
+            layer_starts=np.zeros(1, dtype=np.int64),
+        )
+    space = _explore(
+        cn,
+        max_states=max_states,
+        time_limit=time_limit,
+        progress=progress,
+        chunk=chunk,
+        clock=clock,
+        stop_when=stop_when,
+        sleep_sets=False,
+    )
+    dead: list[npt.NDArray[np.int64]] = []
+    removed = 0
+    for start, block in space.iter_markings():
+        terminal = terminal_rows(net, block)
+        removed += input_edges_at(net, block, terminal)
+        dead.append(start + np.flatnonzero(terminal).astype(np.int64))
+    deadlocks = np.concatenate(dead) if dead else np.zeros(0, dtype=np.int64)
+    # An incomplete search did not expand its last states: their edges were never
+    # counted, so only a complete one has the removed edges to take back.
+    edges = space.edges - removed if space.complete else space.edges
+    return replace(space, deadlocks=deadlocks, edges=edges)
+
+
+def _explore(
+    cn: CompactNet,
+    *,
+    max_states: int | None = DEFAULT_MAX_STATES,
+    time_limit: float | None = None,
+    por: bool = False,
+    visible: Sequence[str] | None = None,
+    progress: ProgressCallback | None = None,
+    chunk: int = DEFAULT_CHUNK,
+    clock: Clock = time.perf_counter,
+    stop_when: StopWhen | None = None,
+    sleep_sets: bool = True,
+) -> StateSpace:
+    """`explore` proper: the P/T search (see there)."""
     reducer = None
     if por:
         vis = None if visible is None else [cn.net.place_index(p) for p in visible]
         reducer = StubbornSets(cn, vis)
     _settle_allocator()
-    explorer = _Explorer(cn, max_states, time_limit, reducer, progress, chunk, clock)
+    explorer = _Explorer(
+        cn, max_states, time_limit, reducer, progress, chunk, clock, sleep_sets=sleep_sets
+    )
     explorer.stop_when = stop_when
     with contextlib.suppress(_Stop):  # a budget ran out; the reason is recorded
         explorer.run()

@@ -6,8 +6,9 @@ mission (`applies`) gets three more properties, decided on the reachability grap
 its completely explored, unreduced state space (`analysis.stategraph`):
 
 * ``no_engine_cycle``: no cycle of reachable markings made only of engine transitions
-  (plain and command ones). On such a cycle the engine fires forever without waiting
-  for the vehicle: the runtime stops it with an engine-spin error. Evidence: a lasso,
+  (plain and command ones; replies and operator inputs are the environment). On such
+  a cycle the engine fires forever without waiting for the vehicle: the runtime stops
+  it with an engine-spin error. Evidence: a lasso,
   a shortest prefix from the initial marking, then the cycle.
 * ``final_always_reachable``: from every reachable marking some declared final marking
   is reachable; nothing the vehicle answers can take the mission where it can no
@@ -19,7 +20,9 @@ its completely explored, unreduced state space (`analysis.stategraph`):
   holds when no fair infinite run exists (no fair strongly connected component: the
   evidence is a lasso whose cycle satisfies every fairness group, e.g. "DEPTH? replies
   timeout forever, retry") and no dead marking is a non-final one (the evidence is
-  the shortest trace to it). Required only by missions with ``require termination``;
+  the shortest trace to it). Operator inputs have no fairness obligation (the operator
+  may never act), and a marking where only inputs are enabled is dead: the run has
+  stopped there (`analysis.inputs`). Required only by missions with ``require termination``;
   otherwise a violation is a warning (`PropertyResult.required`).
 
 The first two are required of every mission: a certificate without them proven is
@@ -338,10 +341,12 @@ class _Decider(_Results):
         from analysis.stategraph import nontrivial, scc_labels, shortest_path
 
         graph, n = self.graph, self.n
-        replies = np.array(
-            [t.kind is TransitionKind.REPLY for t in self.net.transitions], dtype=np.bool_
+        # The vehicle's replies and the operator's inputs are the environment.
+        environment = np.array(
+            [t.kind in (TransitionKind.REPLY, TransitionKind.INPUT) for t in self.net.transitions],
+            dtype=np.bool_,
         )
-        mine = np.flatnonzero(~replies[graph.labels])
+        mine = np.flatnonzero(~environment[graph.labels])
         s, d = self.src[mine], self.dst[mine]
         comp = scc_labels(n, s, d)
         on_cycle = nontrivial(n, s, d, comp)[comp] if n else np.zeros(0, dtype=np.bool_)

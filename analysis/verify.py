@@ -31,6 +31,7 @@ import numpy as np
 import numpy.typing as npt
 
 from analysis.coverability import coverability
+from analysis.inputs import has_inputs
 from analysis.progress import ProgressCallback
 from analysis.report import (
     Evidence,
@@ -878,7 +879,14 @@ class _Checker:
                 "summary": bounded.explain(),
             }
         siphons = siphon_trap_check(net, time_limit=STRUCTURE_SECONDS)
-        facts["siphons_traps"] = {"summary": siphons.explain()}
+        summary = siphons.explain()
+        if has_inputs(net):
+            summary += (
+                " (about markings where no transition at all is enabled: with operator "
+                "inputs a marking where only inputs are enabled is dead too, and this "
+                "says nothing about those)"
+            )
+        facts["siphons_traps"] = {"summary": summary}
         return facts
 
 

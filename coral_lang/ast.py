@@ -272,8 +272,33 @@ class Require:
     name_span: Span = field(default=_NOWHERE, compare=False, repr=False)
 
 
+@dataclass(slots=True)
+class InputName:
+    """One name of an ``input`` statement."""
+
+    name: str
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
+@dataclass(slots=True)
+class Inputs:
+    """``input abort_requested, surface_now``: places only the operator marks, each at
+    most once per run (see ``docs/language.md``, "Operator inputs")."""
+
+    names: tuple[InputName, ...]
+    span: Span = field(default=_NOWHERE, compare=False, repr=False)
+
+
 Declaration = (
-    Const | Places | Final | TransitionDecl | Include | AssertDecl | TemporalAssert | Require
+    Const
+    | Places
+    | Final
+    | TransitionDecl
+    | Include
+    | AssertDecl
+    | TemporalAssert
+    | Require
+    | Inputs
 )
 
 

@@ -15,6 +15,7 @@ CODES: dict[str, str] = {
     "CORAL007": "missing mission header",
     "CORAL008": "temporal property outside its logic (or an atom it cannot use)",
     "CORAL009": "unknown requirement",
+    "CORAL010": "operator input misused (signalled, given tokens or a capacity, too many)",
     "CORAL101": "unknown command",
     "CORAL102": "parameter count wrong, parameter missing, unknown or given twice",
     "CORAL103": "parameter type wrong",

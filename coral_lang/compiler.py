@@ -9,6 +9,10 @@ Lowering (see ``docs/language.md``):
   ``action``, it also puts a token in the pending place ``t.pending``; each reply kind
   ``r`` of the command becomes a reply transition ``t.r`` that takes the pending token
   and marks the places the mission maps ``r`` to (nothing, for ``r: ignore``).
+* ``input X`` declares the place ``X`` (no initial tokens) that only the operator
+  marks: a place ``X.armed`` (one token) and an INPUT transition ``X.operator`` moving
+  it to ``X``, so the operator gives each input at most once per run. No mission
+  transition or reply may mark ``X``.
 
 All errors of all files are collected before anything is reported.
 """
@@ -33,6 +37,7 @@ from coral_lang.diagnostics import (
 )
 from coral_lang.gcpause import cyclic_gc_paused
 from coral_lang.net import (
+    MAX_INPUTS,
     Assertion,
     AssertKind,
     Command,
@@ -52,6 +57,8 @@ from coral_lang.safefile import MISSION_LIMIT, UnreadableFile, is_within, read_t
 
 PENDING_SUFFIX = ".pending"
 FREE_SUFFIX = ".free"
+ARMED_SUFFIX = ".armed"
+OPERATOR_SUFFIX = ".operator"
 MAX_INCLUDED_BYTES = 16 * 1024 * 1024
 """All the files of one mission (the mission and everything it includes) together: each
 file is bounded by ``MISSION_LIMIT``, and this bounds how many of them add up, so a
@@ -156,6 +163,14 @@ class _PlaceInfo:
     capacity: int | None = None
     capacity_span: Span | None = None
     file: str = ""
+
+
+@dataclass
+class _InputInfo:
+    """An operator input: its name and the span of its (first) declaration."""
+
+    name: str
+    span: Span
 
 
 @dataclass
@@ -314,15 +329,19 @@ class _Compiler:
         profile = self._header(root)
         consts = self._consts()
         places = self._places(consts)
+        inputs = self._inputs(places)
         finals = self._finals(places, consts)
         assertions = self._assertions(places, consts)
         transitions, pending = self._transitions(places, consts, profile, root.vehicle)
+        self._check_input_writers(inputs)
         assertions.update(self._temporal(places, consts, profile, finals))
         requirements = self._requirements()
         net: Net | None = None
         if not any(d.severity is Severity.ERROR for d in self.diagnostics):
             in_order = [assertions[i] for i in sorted(assertions)]  # source order
-            net = self._build(root, places, pending, transitions, finals, in_order, requirements)
+            net = self._build(
+                root, places, pending, transitions, finals, in_order, requirements, inputs
+            )
         return CompileResult(
             net, sort_diagnostics(self.diagnostics), self.sources, self.missions, profile
         )
@@ -482,6 +501,83 @@ class _Compiler:
                     info.initial_span or info.span,
                 )
         return places
+
+    def _inputs(self, places: dict[str, _PlaceInfo]) -> dict[str, _InputInfo]:
+        """The ``input`` statements, checked, in first-declaration order; each input
+        name is added to ``places`` (a `place` of the same name is the same place).
+
+        An input declared twice (say in two included files) is one input. The place
+        must start empty and have no capacity: the operator's token arrives only when
+        the operator acts, and a capacity would block the operator's transition.
+        """
+        inputs: dict[str, _InputInfo] = {}
+        for declaration, file in self.declarations:
+            if not isinstance(declaration, ast.Inputs):
+                continue
+            for decl in declaration.names:
+                if decl.name in inputs:
+                    continue
+                if len(inputs) == MAX_INPUTS:
+                    self.error(
+                        "CORAL010",
+                        f"too many operator inputs: '{decl.name}' would be number "
+                        f"{MAX_INPUTS + 1}, at most {MAX_INPUTS} are supported",
+                        decl.span,
+                        "inputs declared: " + ", ".join(inputs),
+                    )
+                    continue
+                info = places.get(decl.name)
+                if info is None:
+                    places[decl.name] = _PlaceInfo(decl.name, decl.span, file=file)
+                else:
+                    if info.initial:
+                        self.error(
+                            "CORAL010",
+                            f"operator input '{decl.name}' must start empty, but the place "
+                            f"is given {info.initial} initial tokens at {info.initial_span}",
+                            decl.span,
+                            "only the operator marks an input place",
+                        )
+                    if info.capacity is not None:
+                        self.error(
+                            "CORAL010",
+                            f"operator input '{decl.name}' cannot have a capacity "
+                            f"(given at {info.capacity_span})",
+                            decl.span,
+                            "a full input place would block the operator",
+                        )
+                inputs[decl.name] = _InputInfo(decl.name, decl.span)
+        return inputs
+
+    def _check_input_writers(self, inputs: dict[str, _InputInfo]) -> None:
+        """Refuse a ``signal`` or reply mapping that marks an operator input."""
+        if not inputs:
+            return
+        for declaration, _ in self.declarations:
+            if not isinstance(declaration, ast.TransitionDecl):
+                continue
+            for ref in declaration.signal:
+                if ref.place in inputs:
+                    self.error(
+                        "CORAL010",
+                        f"transition '{declaration.name}' signals operator input "
+                        f"'{ref.place}': only the operator marks it",
+                        ref.span,
+                        f"'{ref.place}' is declared an input at {inputs[ref.place].span}; "
+                        "a transition may wait on it, not signal it",
+                    )
+            if declaration.action is None:
+                continue
+            for reply in declaration.action.replies:
+                for ref in reply.targets or ():
+                    if ref.place in inputs:
+                        self.error(
+                            "CORAL010",
+                            f"reply '{reply.reply}' of transition '{declaration.name}' marks "
+                            f"operator input '{ref.place}': only the operator marks it",
+                            ref.span,
+                            f"'{ref.place}' is declared an input at {inputs[ref.place].span}",
+                        )
 
     def _tokens(
         self,
@@ -985,6 +1081,7 @@ class _Compiler:
         finals: list[FinalMarking],
         assertions: list[Assertion],
         requirements: tuple[str, ...] = (),
+        inputs: dict[str, _InputInfo] | None = None,
     ) -> Net:
         mission_places = [
             Place(
@@ -1011,16 +1108,49 @@ class _Compiler:
         }
         if bounded:
             transitions = [_with_complements(t, bounded) for t in transitions]
+        armed, operator = _operator_inputs(list((inputs or {}).values()))
         return Net(
             name=root.name or "mission",
-            places=(*mission_places, *pending, *complements),
-            transitions=tuple(transitions),
+            places=(*mission_places, *pending, *complements, *armed),
+            transitions=(*transitions, *operator),
             finals=tuple(finals),
             assertions=tuple(assertions),
             vehicle=root.vehicle,
             sources=tuple(self.sources),
             requirements=requirements,
         )
+
+
+def _operator_inputs(inputs: list[_InputInfo]) -> tuple[list[Place], list[Transition]]:
+    """For each input ``X``: the place ``X.armed`` (1 token: the operator may still give
+    it) and the INPUT transition ``X.operator`` moving that token to ``X``."""
+    places: list[Place] = []
+    transitions: list[Transition] = []
+    for info in inputs:
+        armed = info.name + ARMED_SUFFIX
+        places.append(
+            Place(
+                armed,
+                1,
+                PlaceKind.ARMED,
+                label=f"operator may give {info.name}",
+                span=info.span,
+                armed_of=info.name,
+            )
+        )
+        transitions.append(
+            Transition(
+                info.name + OPERATOR_SUFFIX,
+                ((armed, 1),),
+                ((info.name, 1),),
+                TransitionKind.INPUT,
+                0,
+                f"operator: {info.name}",
+                info.span,
+                operator_input=info.name,
+            )
+        )
+    return places, transitions
 
 
 def _with_complements(transition: Transition, bounded: dict[str, str]) -> Transition:

@@ -20,6 +20,9 @@ from coral_lang.net import Net, Place, PlaceKind, Transition, TransitionKind
 __all__ = ["HIGHLIGHT_COLOR", "to_dot"]
 
 HIGHLIGHT_COLOR = "red"
+OPERATOR_COLOR = "lightgoldenrod1"
+"""Fill of operator inputs (INPUT transitions) and their armed places: the operator,
+not the engine or the vehicle, moves these tokens."""
 _TOKEN = "\u2022"  # a bullet: one drawn token
 _MAX_DRAWN_TOKENS = 3  # above this a number reads better than a row of dots
 
@@ -117,6 +120,9 @@ def _place_attrs(place: Place, count: int, highlighted: bool) -> dict[str, str]:
         attrs["style"] = "dashed"  # a command in flight: the vehicle, not the net, moves it
     elif place.kind is PlaceKind.COMPLEMENT:
         attrs["style"] = "dotted"
+    elif place.kind is PlaceKind.ARMED:
+        # the operator may still give its input: drawn in the operator's colour
+        attrs.update(style="filled", fillcolor=OPERATOR_COLOR)
     if highlighted:
         attrs.update(color=HIGHLIGHT_COLOR, penwidth="2", fontcolor=HIGHLIGHT_COLOR)
     return attrs
@@ -134,6 +140,9 @@ def _transition_attrs(tr: Transition, highlighted: bool) -> dict[str, str]:
         "label": label,
         "tooltip": _tooltip(tr.name, tr.label, tr.kind.value),
     }
+    if tr.kind is TransitionKind.INPUT:
+        styles.append("filled")  # fired by the operator, not by the engine
+        attrs["fillcolor"] = OPERATOR_COLOR
     if highlighted:
         styles.append("filled")
         attrs.update(color=HIGHLIGHT_COLOR, penwidth="2", fillcolor="mistyrose")

@@ -54,14 +54,25 @@ KEYWORDS = frozenset(
     {
         "mission", "vehicle", "const", "place", "capacity", "final", "transition", "priority",
         "wait", "action", "signal", "include", "assert", "never", "reachable", "bound", "ignore",
-        "always", "eventually", "leadsto", "ltl", "ctl", "require",
+        "always", "eventually", "leadsto", "ltl", "ctl", "require", "input",
         "not", "and", "or", "true", "false", "deadlock",
     }
 )  # fmt: skip
 
 # Words that start a top-level statement: the parser resynchronises on them after an error.
 STATEMENT_KEYWORDS = frozenset(
-    {"mission", "vehicle", "const", "place", "final", "transition", "include", "assert", "require"}
+    {
+        "mission",
+        "vehicle",
+        "const",
+        "place",
+        "final",
+        "transition",
+        "include",
+        "assert",
+        "require",
+        "input",
+    }
 )
 
 _PUNCTUATION = {

@@ -219,13 +219,15 @@ class _Parser:
                 return self.assertion()
             if word == "require":
                 return self.require()
+            if word == "input":
+                return self.inputs()
             if token.text in ("wait", "action", "signal", "priority"):
                 raise self.error(
                     f"'{token.text}' must belong to a transition; start one with 'transition NAME'"
                 )
         raise self.error(
             "expected a declaration (const, place, final, transition, include, assert, "
-            f"require), found {token.describe()}"
+            f"require, input), found {token.describe()}"
         )
 
     def const(self) -> ast.Const:
@@ -308,6 +310,17 @@ class _Parser:
         while self.accept(Kind.COMMA):
             decls.append(self.place_decl())
         return ast.Places(tuple(decls), _join(keyword, self.previous))
+
+    def inputs(self) -> ast.Inputs:
+        keyword = self.advance()
+        names = [self._input_name()]
+        while self.accept(Kind.COMMA):
+            names.append(self._input_name())
+        return ast.Inputs(tuple(names), _join(keyword, self.previous))
+
+    def _input_name(self) -> ast.InputName:
+        token = self.ident("an operator input name, e.g. 'input abort_requested'")
+        return ast.InputName(token.text, token.span)
 
     def place_decl(self) -> ast.PlaceDecl:
         name = self.ident("a place name")

@@ -34,6 +34,7 @@ from defusedxml import DefusedXmlException, DTDForbidden, EntitiesForbidden
 
 from coral_lang.diagnostics import PnmlError, Span, did_you_mean
 from coral_lang.net import (
+    MAX_INPUTS,
     Assertion,
     AssertKind,
     Command,
@@ -355,6 +356,13 @@ class _Reader:
                 )
             )
         extras = self.read_net_block(net)
+        armed = sum(p.kind is PlaceKind.ARMED for p in places.values())
+        if armed > MAX_INPUTS:
+            raise self.error(
+                net,
+                f"net '{net_ident}' has {armed} armed places (operator inputs); "
+                f"at most {MAX_INPUTS} are supported",
+            )
         try:
             return Net(
                 name=self.coral_name(net),
@@ -437,6 +445,7 @@ class _Reader:
             resources=self.resources(block),
             pending_of=info.attrs.get("pending-of"),
             complement_of=info.attrs.get("complement-of"),
+            armed_of=info.attrs.get("armed-of"),
         )
 
     def read_transition(
@@ -463,6 +472,7 @@ class _Reader:
             pending=info.attrs.get("pending"),
             reply_to=info.attrs.get("reply-to"),
             reply=info.attrs.get("reply"),
+            operator_input=info.attrs.get("operator-input"),
         )
 
     def read_count(self, element: _Element, what: str, minimum: int) -> int:
@@ -925,6 +935,7 @@ def _place_block(place: Place, ident: str) -> list[str]:
         or place.resources
         or place.pending_of is not None
         or place.complement_of is not None
+        or place.armed_of is not None
     )
     if mission:
         lines.append(
@@ -935,6 +946,7 @@ def _place_block(place: Place, ident: str) -> list[str]:
                     "capacity": place.capacity,
                     "pending-of": place.pending_of,
                     "complement-of": place.complement_of,
+                    "armed-of": place.armed_of,
                 },
             )
         )
@@ -952,6 +964,7 @@ def _transition_block(tr: Transition, ident: str) -> list[str]:
         or tr.pending is not None
         or tr.reply_to is not None
         or tr.reply is not None
+        or tr.operator_input is not None
     )
     if mission:
         lines.append(
@@ -963,6 +976,7 @@ def _transition_block(tr: Transition, ident: str) -> list[str]:
                     "pending": tr.pending,
                     "reply-to": tr.reply_to,
                     "reply": tr.reply,
+                    "operator-input": tr.operator_input,
                 },
             )
         )

@@ -39,6 +39,8 @@ def format_declaration(declaration: ast.Declaration) -> list[str]:
         return [format_temporal(declaration)]
     if isinstance(declaration, ast.Require):
         return [f"require {declaration.name}"]
+    if isinstance(declaration, ast.Inputs):
+        return ["input " + ", ".join(n.name for n in declaration.names)]
     if isinstance(declaration, ast.AssertDecl):
         if declaration.kind is ast.AssertKind.BOUND:
             assert declaration.bound is not None

@@ -6,6 +6,7 @@ import functools
 import gzip
 import hashlib
 import os
+import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -92,3 +93,20 @@ def session_signing_key() -> TestKey:
 def signing_key() -> TestKey:
     """The session's signing key pair (`session_signing_key`)."""
     return session_signing_key()
+
+
+BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
+
+
+@pytest.fixture(scope="session")
+def chromium() -> str:
+    """The headless browser for the HTML report and watch page tests (``.ci/run``
+    installs it): skipped on a developer's machine without it, a failure under CI."""
+    for name in BROWSERS:
+        found = shutil.which(name)
+        if found:
+            return found
+    message = "Chromium is not installed (apt-get install chromium)"
+    if os.environ.get("CI"):
+        pytest.fail(f"{message}; CI must run the browser tests")
+    pytest.skip(message)

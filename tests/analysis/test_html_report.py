@@ -8,9 +8,7 @@ must not hide a missing feature.
 
 from __future__ import annotations
 
-import os
 import re
-import shutil
 import subprocess
 from dataclasses import dataclass
 from html.parser import HTMLParser
@@ -30,7 +28,6 @@ from tests.conftest import EXAMPLES
 
 POOL = str(EXAMPLES / "pool_mission" / "pool_mission.coral")
 DEADLOCK = str(EXAMPLES / "faulty" / "deadlock.coral")
-BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
 
 @dataclass(frozen=True)
@@ -227,19 +224,6 @@ def test_builtin_layout_is_selectable(tmp_path: Path) -> None:
 
 
 # -- in a browser -----------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def chromium() -> str:
-    """The headless browser; skipped locally when missing, a failure under CI."""
-    for name in BROWSERS:
-        found = shutil.which(name)
-        if found:
-            return found
-    message = "Chromium is not installed (apt-get install chromium)"
-    if os.environ.get("CI"):
-        pytest.fail(f"{message}; CI must run the browser tests")
-    pytest.skip(message)
 
 
 def _browser(chromium: str, tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:

@@ -148,11 +148,15 @@ def temporal_asserts(
 @st.composite
 def missions(draw: st.DrawFn) -> ast.Mission:
     """A valid mission for ROMEO: places, constants, finals, transitions, assertions
-    (temporal ones too), requirements."""
-    names = draw(st.lists(identifiers, min_size=2, max_size=12, unique=True))
+    (temporal ones too), requirements, operator inputs (waited on, never signalled)."""
+    names = draw(st.lists(identifiers, min_size=2, max_size=14, unique=True))
+    n_inputs = draw(st.integers(0, min(2, len(names) - 2)))
+    inputs, names = names[:n_inputs], names[n_inputs:]
     n_places = draw(st.integers(1, len(names) - 1))
     places, others = names[:n_places], names[n_places:]
     decls: list[ast.Declaration] = []
+    if inputs:
+        decls.append(ast.Inputs(tuple(ast.InputName(i) for i in inputs)))
     groups = draw(st.lists(st.integers(1, 3), min_size=1, max_size=len(places)))
     index = 0
     for size in groups:
@@ -182,7 +186,7 @@ def missions(draw: st.DrawFn) -> ast.Mission:
         if action is not None:
             commands.append(transition_name)
             replies += [f"{transition_name}.{r.reply}" for r in action.replies]
-        wait = draw(token_sets(places, min_size=1))
+        wait = draw(token_sets([*places, *inputs], min_size=1))
         signal = draw(token_sets(places))
         priority = draw(st.one_of(st.none(), st.integers(-3, 3).map(ast.Number)))
         decls.append(ast.TransitionDecl(transition_name, priority, wait, action, signal))

@@ -328,6 +328,44 @@ TABLE: list[tuple[str, str]] = [
         HEADER + "require terminaton\n",
         "3:9: unknown requirement 'terminaton' (did you mean 'termination'?) [CORAL009]",
     ),
+    # operator inputs
+    (
+        HEADER + "place input\n",
+        "3:7: expected a place name, found keyword 'input' (keywords are reserved) [CORAL001]",
+    ),
+    (
+        HEADER + "input wait\n",
+        "3:7: expected an operator input name, e.g. 'input abort_requested', found keyword "
+        "'wait' (keywords are reserved) [CORAL001]",
+    ),
+    (
+        HEADER + PLACES + "input stop_now\ntransition t wait { a } signal { b, stop_now }\n",
+        "5:37: transition 't' signals operator input 'stop_now': only the operator marks it "
+        "[CORAL010]",
+    ),
+    (
+        HEADER
+        + PLACES
+        + "input stop_now\n"
+        + "transition go wait { a } action { ROMEO(DEPTH, z = 2.0) -> { ack: stop_now, "
+        + "error: c } }\n",
+        "5:67: reply 'ack' of transition 'go' marks operator input 'stop_now': only the "
+        "operator marks it [CORAL010]",
+    ),
+    (
+        HEADER + "place stop_now = 1\ninput stop_now\n",
+        "4:7: operator input 'stop_now' must start empty, but the place is given 1 initial "
+        "tokens at m.coral:3:18 [CORAL010]",
+    ),
+    (
+        HEADER + "place stop_now capacity 2\ninput stop_now\n",
+        "4:7: operator input 'stop_now' cannot have a capacity (given at m.coral:3:25) [CORAL010]",
+    ),
+    (
+        HEADER + "input i1, i2, i3, i4, i5, i6, i7, i8\ninput i1, i9\n",
+        "4:11: too many operator inputs: 'i9' would be number 9, at most 8 are supported "
+        "[CORAL010]",
+    ),
 ]
 
 
