@@ -87,12 +87,20 @@ class BadMarkings:
     A marking is bad when it satisfies every constraint, is dead if ``dead`` is set,
     and is none of ``exclude``.
 
+    ``exclude`` rows may be projections: a final marking leaves each armed place free
+    (0 or 1), so listing finals as full markings costs 2**k rows (and z3 disjuncts) for
+    k operator inputs, while one row per final on `Net.final_columns` says the same.
+
     Attributes:
         constraints: A conjunction of linear place constraints (empty: no restriction).
         dead: Also require that no transition is enabled (operator inputs aside: a
             marking where only inputs are enabled is terminal, hence dead).
-        exclude: Full markings (aligned with `Net.places`) that are not bad, e.g. the
-            declared final markings when looking for unexpected deadlocks.
+        exclude: Markings that are not bad, e.g. the declared final markings when
+            looking for unexpected deadlocks: full markings (aligned with
+            `Net.places`), or their values on ``exclude_columns`` when that is set.
+        exclude_columns: The place columns ``exclude`` rows give (``None``: all).
+        exclude_armed: Columns an excluded marking holds at most 1 in (the armed
+            places a final leaves free).
         label: How a report names this set, e.g. ``"a and b marked together"``.
     """
 
@@ -100,10 +108,20 @@ class BadMarkings:
     dead: bool = False
     exclude: tuple[Marking, ...] = ()
     label: str = ""
+    exclude_columns: tuple[int, ...] | None = None
+    exclude_armed: tuple[int, ...] = ()
+
+    def excluded(self, marking: Marking) -> bool:
+        """Whether ``marking`` is one of ``exclude`` (so not bad)."""
+        if not self.exclude or any(marking[i] > 1 for i in self.exclude_armed):
+            return False
+        if self.exclude_columns is None:
+            return tuple(marking) in set(self.exclude)
+        return tuple(marking[i] for i in self.exclude_columns) in set(self.exclude)
 
     def matches(self, net: Net, marking: Marking) -> bool:
         """Whether ``marking`` is in the set (used to confirm candidates by search)."""
-        if tuple(marking) in set(self.exclude):
+        if self.excluded(tuple(marking)):
             return False
         if not all(c.holds(net, marking) for c in self.constraints):
             return False
@@ -147,8 +165,18 @@ def deadlocks(exclude: Iterable[Marking] = ()) -> BadMarkings:
 
 
 def unexpected_deadlocks(net: Net) -> BadMarkings:
-    """Dead markings other than the net's declared final markings."""
-    return deadlocks(net.final_markings())
+    """Dead markings other than the net's declared final markings (one projected row
+    per final, see `BadMarkings`)."""
+    patterns = tuple(net.final_patterns())
+    if not patterns:
+        return deadlocks()
+    return BadMarkings(
+        dead=True,
+        exclude=patterns,
+        label="a dead marking that is not a declared final marking",
+        exclude_columns=net.final_columns(),
+        exclude_armed=net.armed_columns(),
+    )
 
 
 # -- what the solver says -----------------------------------------------------------------
@@ -376,8 +404,11 @@ def _equation(
             # Disabled: some input place holds fewer tokens than the arc needs. A
             # transition without inputs is always enabled, so Or([]) = False is right.
             solver.add(z3.Or([marking[net.place_index(p)] < w for p, w in tr.inputs]))
+    columns = range(len(marking)) if bad.exclude_columns is None else bad.exclude_columns
     for final in bad.exclude:
-        solver.add(z3.Or([v != k for v, k in zip(marking, final, strict=True)]))
+        # Not this final: some constrained place differs, or some armed place holds 2+.
+        differs = [marking[p] != k for p, k in zip(columns, final, strict=True)]
+        solver.add(z3.Or(differs + [marking[p] > 1 for p in bad.exclude_armed]))
     return solver, marking, counts
 
 

@@ -113,26 +113,63 @@ def certificate_gaps(net: Net, properties: Iterable[Mapping[str, object]]) -> li
     return gaps
 
 
-def final_rows(block: IntArray, finals: IntArray) -> BoolArray:
-    """Which rows of ``block`` (markings) are among ``finals`` (full final markings)."""
-    if not finals.shape[0]:  # no final marking (with no places, one is empty yet counts)
-        return np.zeros(block.shape[0], dtype=np.bool_)
-    hits: BoolArray = (block[:, None, :] == finals[None, :, :]).all(axis=2).any(axis=1)
+@dataclass(frozen=True)
+class FinalPatterns:
+    """The declared finals as arrays, projected on `Net.final_columns`.
+
+    A final leaves each armed place free (0 or 1): expanding it into full markings
+    (`Net.final_markings`) costs 2**k rows for k operator inputs, and comparing a block
+    of markings against all of them at once cost hundreds of MB. Comparing only the
+    constrained columns against one row per declared final costs a block's size.
+
+    Attributes:
+        columns: Place columns a final constrains (all but the armed ones).
+        armed: Armed place columns; each must hold at most 1.
+        patterns: One row per distinct declared final, on ``columns``.
+    """
+
+    columns: IntArray
+    armed: IntArray
+    patterns: IntArray
+
+    @classmethod
+    def of(cls, net: Net) -> FinalPatterns:
+        """The projected finals of ``net``."""
+        columns = net.final_columns()
+        patterns = net.final_patterns()
+        return cls(
+            np.array(columns, dtype=np.int64),
+            np.array(net.armed_columns(), dtype=np.int64),
+            # Explicit shape: with no columns, reshape(-1, 0) cannot infer the rows.
+            np.array(patterns, dtype=np.int64).reshape(len(patterns), len(columns)),
+        )
+
+    @property
+    def full(self) -> bool:
+        """Whether the patterns are full markings (the net has no armed place)."""
+        return not self.armed.size
+
+
+def final_rows(block: npt.NDArray[np.integer], finals: FinalPatterns) -> BoolArray:
+    """Which rows of ``block`` (full markings) are declared final markings. Memory is
+    one boolean per cell of ``block``, whatever the number of inputs or finals."""
+    hits = np.zeros(block.shape[0], dtype=np.bool_)
+    if not finals.patterns.shape[0]:  # no final (with no places, one is empty yet counts)
+        return hits
+    projected = block[:, finals.columns]
+    for pattern in finals.patterns:
+        hits |= (projected == pattern).all(axis=1)
+    if finals.armed.size:
+        hits &= (block[:, finals.armed] <= 1).all(axis=1)
     return hits
-
-
-def _finals(net: Net) -> IntArray:
-    finals = net.final_markings()
-    # Explicit rows: with no places, reshape(-1, 0) cannot infer them (bench/redteam.py).
-    return np.array(finals, dtype=np.int64).reshape(len(finals), len(net.places))
 
 
 def non_final_dead_states(space: StateSpace) -> IntArray:
     """Every dead state of ``space`` whose marking is not a declared final marking, in
     state order (so by depth: the first has the shortest trace)."""
     dead = np.asarray(space.deadlocks, dtype=np.int64)
-    finals = _finals(space.net)
-    if not dead.size or not finals.shape[0]:
+    finals = FinalPatterns.of(space.net)
+    if not dead.size or not finals.patterns.shape[0]:
         return dead
     keep = np.ones(dead.size, dtype=np.bool_)
     for start in range(0, dead.size, DEAD_CHUNK):
@@ -145,15 +182,25 @@ def non_final_dead_states(space: StateSpace) -> IntArray:
 def final_states(space: StateSpace) -> BoolArray:
     """Per state of ``space``, whether its marking is a declared final marking.
 
-    Packed keys are linear in the marking, so a reachable final marking has the key
-    `Layout.pack` gives it: compare keys instead of unpacking every marking, then
-    confirm the (few) candidates, since an unreachable final may share a key."""
+    Without operator inputs the finals are full markings, and packed keys are linear
+    in the marking, so a reachable final has the key `Layout.pack` gives it: compare
+    keys instead of unpacking every marking, then confirm the (few) candidates, since
+    an unreachable final may share a key. With inputs a final leaves the armed places
+    free, so markings are unpacked block by block and compared on `FinalPatterns`."""
     out = np.zeros(space.states, dtype=np.bool_)
-    finals = _finals(space.net)
-    if not finals.size or not space.states:
+    finals = FinalPatterns.of(space.net)
+    if not finals.patterns.shape[0] or not space.states:
+        return out
+    if not finals.full:
+        for start in range(0, space.states, DEAD_CHUNK):
+            stop = min(start + DEAD_CHUNK, space.states)
+            block = space.layout.unpack(space.keys[start:stop])
+            out[start:stop] = final_rows(block, finals)
         return out
     keys = space.keys[: space.states]
-    for key, final in zip(space.layout.pack(finals), finals.tolist(), strict=True):
+    for key, final in zip(
+        space.layout.pack(finals.patterns), finals.patterns.tolist(), strict=True
+    ):
         for state in np.flatnonzero((keys == key).all(axis=1)).tolist():
             out[state] |= space.marking(state) == tuple(final)
     return out

@@ -47,6 +47,7 @@ from analysis.statespace import StateSpace, explore
 from analysis.termination import (
     DEFAULT_MAX_DEADLOCKS,
     DEFAULT_MAX_EDGES,
+    FinalPatterns,
     TerminationBudget,
     check_termination,
     final_rows,
@@ -506,7 +507,7 @@ class _Checker:
         if not net.finals:
             return []
         title = "a declared final marking is reachable"
-        finals = np.array(net.final_markings(), dtype=np.int64)
+        finals = FinalPatterns.of(net)
         hit = self.space.find(lambda block: final_rows(block, finals))
         if hit is not None:
             reached = format_tokens(self.net.marking_dict(self.space.marking(hit)).items())

@@ -17,7 +17,7 @@ import enum
 import hashlib
 import itertools
 import json
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
@@ -132,6 +132,27 @@ class FinalMarking:
 
     tokens: tuple[tuple[str, int], ...]
     span: Span | None = None
+
+
+@dataclass(frozen=True)
+class FinalTest:
+    """Whether a full marking is a declared final, without the 2**k expansion.
+
+    Attributes:
+        columns: `Net.final_columns` (every place but the armed ones).
+        armed: `Net.armed_columns`; each must hold 0 or 1 (input given or not).
+        patterns: `Net.final_patterns`, the finals projected on ``columns``.
+    """
+
+    columns: tuple[int, ...]
+    armed: tuple[int, ...]
+    patterns: frozenset[tuple[int, ...]]
+
+    def matches(self, marking: Sequence[int]) -> bool:
+        """Whether ``marking`` (aligned with the net's places) is final."""
+        if any(marking[i] > 1 for i in self.armed):
+            return False
+        return tuple(marking[i] for i in self.columns) in self.patterns
 
 
 class AssertKind(enum.Enum):
@@ -293,30 +314,73 @@ class Net:
         """The marked places of ``marking`` as ``{name: tokens}`` (zeros left out)."""
         return {p.name: m for p, m in zip(self.places, marking, strict=True) if m}
 
+    def armed_columns(self) -> tuple[int, ...]:
+        """Columns of the armed places (one per operator input): the places a final
+        marking leaves free, as long as each holds 0 or 1."""
+        armed = tuple(i for i, p in enumerate(self.places) if p.kind is PlaceKind.ARMED)
+        if len(armed) > MAX_INPUTS:
+            raise NetError(f"{len(armed)} operator inputs; at most {MAX_INPUTS} are supported")
+        return armed
+
+    def final_columns(self) -> tuple[int, ...]:
+        """The columns a declared final constrains: every place but the armed ones.
+
+        Comparing markings on these columns only (see `final_patterns`) avoids
+        expanding each final into the 2**k markings `final_markings` lists."""
+        armed = set(self.armed_columns())
+        return tuple(i for i in range(len(self.places)) if i not in armed)
+
+    def final_patterns(self) -> list[tuple[int, ...]]:
+        """Each declared final on `final_columns` (deduplicated, in declaration order):
+        the named tokens, complement places holding their free room, all else 0. A
+        marking is final when its projection is one of these and every armed place
+        holds 0 or 1 (`is_final`)."""
+        columns = self.final_columns()
+        seen: dict[tuple[int, ...], None] = {}
+        for final in self.finals:
+            values = self._final_values(final)
+            seen.setdefault(tuple(values[i] for i in columns), None)
+        return list(seen)
+
+    def _final_values(self, final: FinalMarking) -> list[int]:
+        """``final`` as a full marking with every armed place 0."""
+        values = list(self.marking_from(final.tokens))
+        for i, place in enumerate(self.places):
+            if place.kind is PlaceKind.COMPLEMENT and place.complement_of is not None:
+                base = self.place(place.complement_of)
+                assert base.capacity is not None
+                values[i] = base.capacity - values[self._place_index[base.name]]
+        return values
+
     def final_markings(self) -> list[tuple[int, ...]]:
         """Declared finals as full markings; complement places hold their free room, and
         each armed place is 1 or 0 (input not given, or given and consumed): a final with
-        k inputs stands for 2**k markings, so k is at most `MAX_INPUTS`."""
-        armed = [i for i, p in enumerate(self.places) if p.kind is PlaceKind.ARMED]
-        if len(armed) > MAX_INPUTS:
-            raise NetError(f"{len(armed)} operator inputs; at most {MAX_INPUTS} are supported")
+        k inputs stands for 2**k markings, so k is at most `MAX_INPUTS`.
+
+        Kept for callers that need the markings themselves; to test markings use
+        `is_final` or `final_columns`/`final_patterns`, which do not expand."""
+        armed = self.armed_columns()
         result = []
         for final in self.finals:
-            values = list(self.marking_from(final.tokens))
-            for i, place in enumerate(self.places):
-                if place.kind is PlaceKind.COMPLEMENT and place.complement_of is not None:
-                    base = self.place(place.complement_of)
-                    assert base.capacity is not None
-                    values[i] = base.capacity - values[self._place_index[base.name]]
+            values = self._final_values(final)
             for given in itertools.product((1, 0), repeat=len(armed)):
                 for i, value in zip(armed, given, strict=True):
                     values[i] = value
                 result.append(tuple(values))
         return result
 
+    def final_test(self) -> FinalTest:
+        """The declared finals in projected form, built once for callers that test
+        many markings (the runtime engine after every step)."""
+        return FinalTest(
+            self.final_columns(), self.armed_columns(), frozenset(self.final_patterns())
+        )
+
     def is_final(self, marking: Iterable[int]) -> bool:
-        """Whether ``marking`` is one of the declared final markings."""
-        return tuple(marking) in set(self.final_markings())
+        """Whether ``marking`` is one of the declared final markings: its projection on
+        `final_columns` is a `final_patterns` row and each armed place holds 0 or 1."""
+        values = tuple(marking)
+        return len(values) == len(self.places) and self.final_test().matches(values)
 
     # -- operator inputs ------------------------------------------------------------------
 

@@ -4,10 +4,14 @@ tiny reference explorer that applies the run rule literally."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from collections import deque
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
@@ -17,13 +21,26 @@ from analysis.inputs import has_inputs, legal_trace, terminal_rows
 from analysis.lint import lint
 from analysis.netdraw import OPERATOR_FILL, draw_net
 from analysis.report import Verdict
-from analysis.stateeq import Proven, check_unreachable, unexpected_deadlocks
+from analysis.stateeq import (
+    BadMarkings,
+    Proven,
+    _equation,
+    check_unreachable,
+    deadlocks,
+    unexpected_deadlocks,
+)
 from analysis.stategraph import build_graph
 from analysis.statespace import explore
-from analysis.termination import non_final_dead_states
+from analysis.termination import (
+    FinalPatterns,
+    final_rows,
+    final_states,
+    non_final_dead_states,
+)
 from analysis.verify import VerifyOptions, verify
 from coral_lang.compiler import compile_file, compile_mission, compile_source
 from coral_lang.net import (
+    MAX_INPUTS,
     FinalMarking,
     Net,
     Place,
@@ -98,11 +115,11 @@ def _replays_legally(net: Net, trace: list[int]) -> Marking:
 
 
 @st.composite
-def nets_with_inputs(draw: st.DrawFn) -> Net:
-    """A small random net with 0 to 2 operator inputs that some transitions wait on
-    (and none marks), and up to two final markings."""
+def nets_with_inputs(draw: st.DrawFn, max_inputs: int = 2) -> Net:
+    """A small random net with 0 to ``max_inputs`` operator inputs that some
+    transitions wait on (and none marks), and up to two final markings."""
     n_places = draw(st.integers(1, 4))
-    n_inputs = draw(st.integers(0, 2))
+    n_inputs = draw(st.integers(0, max_inputs))
     names = [f"p{i}" for i in range(n_places)]
     inputs = [f"in{k}" for k in range(n_inputs)]
     places = [Place(p, draw(st.integers(0, 2))) for p in names]
@@ -376,3 +393,153 @@ def test_the_builtin_drawing_fills_inputs_and_armed_places() -> None:
     net = compile_mission(FAULTY)
     svg = draw_net(net, "builtin").svg
     assert svg.count(f'fill="{OPERATOR_FILL}"') == 2
+
+
+# -- final markings without the 2**k expansion ---------------------------------------------
+
+
+@given(nets_with_inputs(max_inputs=3))
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_projected_finals_pick_the_same_reachable_markings_as_the_expanded_ones(
+    net: Net,
+) -> None:
+    """Every consumer's final test agrees with membership in `Net.final_markings` (the
+    old, expanded definition) on all reachable markings."""
+    space = explore(net, max_states=300)
+    states = [space.marking(i) for i in range(space.states)]
+    expanded = set(net.final_markings())
+    old = [m in expanded for m in states]
+    assert [net.is_final(m) for m in states] == old
+    assert final_states(space).tolist() == old
+    block = np.array(states, dtype=np.int64).reshape(len(states), len(net.places))
+    assert final_rows(block, FinalPatterns.of(net)).tolist() == old
+    dead = {space.marking(int(i)) for i in space.deadlocks}
+    stuck = {space.marking(int(i)) for i in non_final_dead_states(space)}
+    assert stuck == {m for m in dead if m not in expanded}
+    new_bad, old_bad = unexpected_deadlocks(net), deadlocks(expanded)
+    assert [new_bad.matches(net, m) for m in states] == [old_bad.matches(net, m) for m in states]
+
+
+def _z3_admits(net: Net, bad: BadMarkings, marking: Marking) -> bool:
+    """Whether the state-equation encoding of ``bad`` admits ``marking`` (a reachable
+    marking always solves the equation itself, so this is the bad-set encoding)."""
+    import z3
+
+    solver, variables, _ = _equation(net, bad, None, 5_000)
+    solver.add(*[v == k for v, k in zip(variables, marking, strict=True)])
+    return bool(solver.check() == z3.sat)
+
+
+@given(nets_with_inputs(max_inputs=3))
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_the_z3_encoding_of_projected_finals_excludes_the_same_markings(net: Net) -> None:
+    space = explore(net, max_states=60)
+    bad = unexpected_deadlocks(net)
+    old = deadlocks(net.final_markings())
+    for i in range(min(space.states, 12)):
+        marking = space.marking(i)
+        assert _z3_admits(net, bad, marking) == old.matches(net, marking), marking
+        assert bad.matches(net, marking) == old.matches(net, marking)
+
+
+def _many_inputs_mission(n_finals: int) -> str:
+    """A mission with `MAX_INPUTS` inputs, each eaten from any end place (26,756
+    reachable markings, 512 dead ones), and ``n_finals`` finals."""
+    names = [f"i{k}" for k in range(MAX_INPUTS)]
+    lines = [
+        "mission many",
+        "vehicle ROMEO",
+        f"input {', '.join(names)}",
+        "place start = 1",
+        "place ready, done_, failed",
+        *[f"place p{k}" for k in range(n_finals)],
+        "final { done_ }",
+        "final { failed }",
+        *[f"final {{ p{k} }}" for k in range(n_finals - 2)],
+        "transition initialise wait { start }",
+        "    action { ROMEO(INIT) -> { done: ready, error: failed } }",
+        "transition fin wait { ready }",
+        "    action { ROMEO(SURFACE) -> { ack: done_, error: failed } }",
+    ]
+    for x in names:
+        for end, place in (("r", "ready"), ("d", "done_"), ("f", "failed")):
+            lines.append(f"transition eat_{x}_{end} wait {{ {place}, {x} }} signal {{ {place} }}")
+    return "\n".join(lines) + "\n"
+
+
+def test_eight_inputs_compare_one_row_per_declared_final() -> None:
+    """The memory regression, without timing: the arrays compared are as many rows as
+    declared finals, not 2**8 times that."""
+    net = compile_source(_many_inputs_mission(6), "many.coral").raise_for_errors()
+    assert len(net.inputs) == MAX_INPUTS and len(net.finals) == 6
+    finals = FinalPatterns.of(net)
+    assert finals.patterns.shape == (6, len(net.places) - MAX_INPUTS)
+    assert finals.armed.size == MAX_INPUTS
+    assert len(unexpected_deadlocks(net).exclude) == 6
+    space = explore(net)
+    assert space.states == 26_756
+    assert final_states(space).sum() == len(space.deadlocks) == 2 * 2**MAX_INPUTS
+    assert not non_final_dead_states(space).size
+
+
+_RSS_SCRIPT = """
+import contextlib, io, sys
+from analysis.cli import main
+with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+    code = main(["verify", sys.argv[1]])
+with open("/proc/self/status") as status:
+    peak = next(line.split()[1] for line in status if line.startswith("VmHWM:"))
+print(code, peak)
+"""
+
+
+def test_verify_on_an_eight_input_mission_stays_small(tmp_path: Path) -> None:
+    """`coral-check verify` on 8 inputs and 6 finals peaked at about 2.1 GB when finals
+    were expanded (about 130 MB now, mostly imports). The child reports the peak of
+    its own address space (VmHWM: ``ru_maxrss`` survives fork and exec, so it would
+    carry the pytest worker's peak), so other processes cannot disturb the figure."""
+    if not Path("/proc/self/status").exists():
+        pytest.skip("needs /proc (Linux) to read the child's own peak RSS")
+    mission = tmp_path / "many.coral"
+    mission.write_text(_many_inputs_mission(6))
+    done = subprocess.run(
+        [sys.executable, "-c", _RSS_SCRIPT, str(mission)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=Path(__file__).resolve().parents[2],
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    code, peak_kb = (int(x) for x in done.stdout.split())
+    assert code in (0, 1)  # verdicts, not a crash (unused places are a violation)
+    assert peak_kb < 400 * 1024, f"peak RSS {peak_kb // 1024} MB"
+
+
+def test_an_armed_place_holding_two_tokens_is_not_left_free_by_a_final() -> None:
+    """A final leaves an armed place free only as 0 or 1 (as the expansion did): a
+    hand-built net that puts a second token there ends in a deadlock, everywhere."""
+    net = Net(
+        "twice",
+        (
+            Place("go", 1),
+            Place("done"),
+            Place("x"),
+            Place("x.armed", 1, PlaceKind.ARMED, armed_of="x"),
+        ),
+        (
+            Transition("t", (("go", 1),), (("done", 1), ("x.armed", 1))),
+            Transition("x.operator", (("x.armed", 1),), (("x", 1),), TransitionKind.INPUT),
+        ),
+        (FinalMarking((("done", 1),)),),
+    )
+    end = net.marking_from({"done": 1, "x.armed": 2})
+    assert not net.is_final(end) and end not in net.final_markings()
+    space = explore(net)
+    states = [space.marking(i) for i in range(space.states)]
+    assert end in states
+    assert not final_states(space)[states.index(end)]
+    assert not final_rows(np.array([end], dtype=np.int64), FinalPatterns.of(net))[0]
+    assert end in {space.marking(int(i)) for i in non_final_dead_states(space)}
+    bad = unexpected_deadlocks(net)
+    assert bad.matches(net, end) and _z3_admits(net, bad, end)
