@@ -12,7 +12,14 @@ writes the event logs to ``--out`` and draws the timeline.
 ``coral-run timeline LOG...`` merges a controller log and a vehicle log and plots them.
 
 ``coral-run watch LOG [--watch [HOST:]PORT]`` serves the mission's state as a web page,
-live from its log or replayed (`runtime.watch`).
+live from its log or replayed (`runtime.watch`); ``coral-run watch LOG --tui`` shows it
+in the terminal instead.
+
+``coral-run MISSION --realtime --watch [HOST:]PORT`` serves the live page from the run
+itself, with the operator's actions (give an input the mission declares, pause, resume);
+``--tui`` shows a live terminal view. ``coral-run operate [HOST:]PORT ACTION [NAME]``
+sends an operator action to such a run (`runtime.operator`; the token comes from the
+run's ``operate.token`` file).
 
 Ctrl-C (SIGINT) and SIGTERM end a run cleanly: no new command is sent, the vehicle is
 asked to make itself safe (``MakeSafe``, acknowledged within a few seconds), the log is
@@ -31,13 +38,18 @@ shell's convention for "ended by a signal").
 from __future__ import annotations
 
 import argparse
+import asyncio
+import contextlib
 import gc
 import shlex
 import signal
 import sys
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import urllib.error
 
 from coral_lang.diagnostics import CoralError
 from runtime.keys import TRUSTED_KEYS_HELP
@@ -45,13 +57,20 @@ from runtime.vehicle.options import add_simulation_arguments, fault_plan_from_ar
 from runtime.vehicle.sigterm import Terminated, sigterm_raises
 
 if TYPE_CHECKING:
-    from runtime.controller import RunResult
+    from runtime.controller import Controller, RunResult
+    from runtime.run import Companion
+    from runtime.watch.feed import LiveFeed
 
 EXIT_OK = 0
 EXIT_MISSION_FAILED = 1
 EXIT_USAGE = 2
 EXIT_SIGINT = 128 + signal.SIGINT  # 130
 EXIT_SIGTERM = 128 + signal.SIGTERM  # 143
+
+OPERATE_TOKEN_FILE = "operate.token"
+"""Where a run with ``--watch`` writes its operate token, in its ``--out`` folder."""
+OPERATE_TOKEN_ENV = "CORAL_OPERATE_TOKEN"
+"""The environment variable ``coral-run operate`` takes the token from, last."""
 
 EXIT_CODES_HELP = (
     "exit codes: 0 the mission reached a declared final marking, 1 it ended otherwise "
@@ -118,7 +137,8 @@ def build_run_parser() -> argparse.ArgumentParser:
         description="Run a verified CORAL mission against ROMEO (or the simulator) across "
         "a real or emulated link, logging both sides. Also: 'coral-run timeline LOG...' "
         "plots a run's logs; 'coral-run fuzz MISSION --runs N --seed S' runs it under N "
-        "random schedules against the simulator.",
+        "random schedules against the simulator; 'coral-run operate [HOST:]PORT ACTION' "
+        "pauses, resumes or gives an input to a run served with --watch.",
         epilog=EXIT_CODES_HELP,
     )
     parser.add_argument("mission", nargs="?", metavar="MISSION", help="mission (.coral)")
@@ -210,6 +230,21 @@ def build_run_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--no-plots", action="store_true", help="do not draw the timeline")
     parser.add_argument("-q", "--quiet", action="store_true", help="print the summary only")
+    parser.add_argument(
+        "--watch",
+        metavar="[HOST:]PORT",
+        type=_watch_address,
+        default=None,
+        help="serve the live operations page of this run (real time only: --realtime or "
+        "--vehicle); bare PORT binds 127.0.0.1, port 0 picks a free one; the operate "
+        f"token is written to OUT/{OPERATE_TOKEN_FILE} (0600)",
+    )
+    parser.add_argument(
+        "--tui",
+        action="store_true",
+        help="show a live terminal view of this run below its progress lines (real time "
+        "only: --realtime or --vehicle)",
+    )
     add_simulation_arguments(parser)
     return parser
 
@@ -252,8 +287,42 @@ def build_watch_parser() -> argparse.ArgumentParser:
         "--watch",
         metavar="[HOST:]PORT",
         type=_watch_address,
-        default=("127.0.0.1", 8765),
+        default=None,
         help="where to serve (default 127.0.0.1:8765; port 0 picks a free one)",
+    )
+    parser.add_argument(
+        "--tui",
+        action="store_true",
+        help="show the mission in this terminal instead of serving a page (follows a live "
+        "log until mission-end; Ctrl-C ends it)",
+    )
+    return parser
+
+
+def build_operate_parser() -> argparse.ArgumentParser:
+    """The parser of ``coral-run operate``."""
+    parser = argparse.ArgumentParser(
+        prog="coral-run operate",
+        description="Send an operator action to a running mission served with --watch: "
+        "pause (no new command is sent; replies are still consumed), resume, or give NAME "
+        "(an input the mission declares, e.g. abort_requested). Every action is "
+        "authenticated with the run's operate token and logged with its origin.",
+        epilog="exit codes: 0 the action was taken, 1 the run refused it (the message says "
+        "why), 2 bad usage, no token, the token refused, or the run cannot be reached. "
+        f"The token comes from --token-file, else OUT/{OPERATE_TOKEN_FILE} (--out, default "
+        f"out/run), else the environment variable {OPERATE_TOKEN_ENV}",
+    )
+    parser.add_argument(
+        "address", metavar="[HOST:]PORT", type=_watch_address, help="where the run serves"
+    )
+    parser.add_argument("action", choices=["pause", "resume", "give"], help="the action")
+    parser.add_argument("name", nargs="?", metavar="NAME", help="with give: the input")
+    parser.add_argument("--token-file", type=Path, metavar="FILE", help="the operate token")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("out/run"),
+        help=f"the run's --out folder, holding {OPERATE_TOKEN_FILE} (default out/run)",
     )
     return parser
 
@@ -265,6 +334,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _timeline(build_timeline_parser().parse_args(args[1:]))
     if args and args[0] == "watch":
         return _watch(build_watch_parser().parse_args(args[1:]))
+    if args and args[0] == "operate":
+        return _operate(build_operate_parser().parse_args(args[1:]))
     if args and args[0] == "fuzz":
         from runtime.fuzz import main as fuzz_main
 
@@ -284,6 +355,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     if options.speed != 1.0 and not options.realtime:
         parser.error("--speed applies to a simulator in real time: add --realtime")
+    for flag, given in (("--watch", options.watch is not None), ("--tui", options.tui)):
+        if given and not options.realtime and options.vehicle is None:
+            print(
+                f"coral-run: {flag} needs a run in real time: add --realtime (or --vehicle)",
+                file=sys.stderr,
+            )
+            return EXIT_USAGE
     from runtime.engine import EngineSpin
 
     try:
@@ -434,6 +512,18 @@ def _run(options: argparse.Namespace) -> int:
             "certificate signed with 'coral-check verify --signing-key')"
         )
     console = (lambda line: None) if options.quiet else print
+    companions: list[Companion] = []
+    if options.watch is not None:
+        _check_watch_address(options.watch)  # before the mission's log says it started
+    if options.watch is not None or options.tui:
+        companions.append(
+            live_companion(
+                watch=options.watch,
+                tui=options.tui,
+                token_file=out_dir / OPERATE_TOKEN_FILE,
+                console=print,
+            )
+        )
     config = RunConfig(
         out_dir=out_dir,
         psk=psk,
@@ -449,6 +539,7 @@ def _run(options: argparse.Namespace) -> int:
         faults=faults,
         telemetry_host=options.telemetry_host,
         log_key_ephemeral=ephemeral,
+        companions=companions,
     )
     if options.resume is not None:
         result = resume_mission(approved, options.resume, config)
@@ -528,13 +619,267 @@ def _timeline(options: argparse.Namespace) -> int:
 
 
 def _watch(options: argparse.Namespace) -> int:
+    if options.tui:
+        if options.watch is not None:
+            print("coral-run watch: give --watch or --tui, not both", file=sys.stderr)
+            return EXIT_USAGE
+        from runtime.tui import watch_log_tui
+
+        try:
+            return watch_log_tui(options.log)
+        except CoralError as exc:
+            print(f"coral-run watch: {exc}", file=sys.stderr)
+            return EXIT_USAGE
     from runtime.watch.main import watch
 
     try:
-        return watch(options.log, *options.watch)
+        return watch(options.log, *(options.watch or ("127.0.0.1", 8765)))
     except CoralError as exc:
         print(f"coral-run watch: {exc}", file=sys.stderr)
         return EXIT_USAGE
+
+
+# ---------------------------------------------------------------------- live run
+
+
+def live_companion(
+    *,
+    watch: tuple[str, int] | None,
+    tui: bool,
+    token_file: Path,
+    console: Callable[[str], None],
+) -> Companion:
+    """The companion of ``--watch`` and ``--tui``: one live feed of the run's log, the
+    live server on it (operate right: the controller's `Controller.operate`) and/or the
+    terminal view, entered before the run and closed after it.
+
+    The server's address is taken at start: an address that cannot be bound is bad
+    usage (`runtime.watch.main.WatchError`, exit 2), though the run's log exists by then.
+    """
+
+    @contextlib.asynccontextmanager
+    async def companion(controller: Controller) -> AsyncIterator[object]:
+        from runtime.watch.feed import LiveFeed
+
+        log = controller.log
+        feed = LiveFeed(log, log.net_json)
+        try:
+            async with contextlib.AsyncExitStack() as stack:
+                if watch is not None:
+                    await _serve_live(stack, feed, watch, controller, token_file, console)
+                if tui:
+                    await stack.enter_async_context(_terminal_view(feed))
+                yield feed
+        finally:
+            feed.close()
+
+    return companion
+
+
+def _check_watch_address(address: tuple[str, int]) -> None:
+    """Bind ``--watch``'s address once and let it go, before the run starts: an address
+    that is not this machine's, or is taken, is bad usage (exit 2) with no mission
+    started and no log written. (Something could still take the port in between; then the
+    run's own start fails the same way, after its log exists.)"""
+    import socket
+
+    from runtime.watch.main import WatchError
+
+    host, port = address
+    if port == 0:
+        try:
+            socket.getaddrinfo(host, 0)
+        except OSError as error:
+            raise WatchError(f"cannot listen on {host}:{port}: {error}") from None
+    try:
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        probe = socket.create_server((host, port), family=family)
+    except OSError as error:
+        raise WatchError(f"cannot listen on {host}:{port}: {error.strerror or error}") from None
+    probe.close()
+
+
+async def _serve_live(
+    stack: contextlib.AsyncExitStack,
+    feed: LiveFeed,
+    address: tuple[str, int],
+    controller: Controller,
+    token_file: Path,
+    console: Callable[[str], None],
+) -> str:
+    """Start the live server on ``stack``; returns its URL. An address that cannot be
+    bound is a `WatchError` (bad usage), not a traceback."""
+    from runtime.watch.live import serve_live
+    from runtime.watch.main import WatchError
+    from runtime.watch.server import static_info
+
+    host, port = address
+    server = serve_live(
+        feed,
+        host=host,
+        port=port,
+        operate=controller.operate,
+        token_file=token_file,
+        console=console,
+        info=static_info(controller.log.net_json, controller.log.meta),
+    )
+    try:
+        return await stack.enter_async_context(server)
+    except OSError as error:
+        raise WatchError(f"cannot listen on {host}:{port}: {error.strerror or error}") from None
+
+
+@contextlib.asynccontextmanager
+async def _terminal_view(feed: LiveFeed) -> AsyncIterator[None]:
+    """The terminal view as a task beside the run; stopped (then cancelled if it does
+    not stop within a few seconds) when the run ends."""
+    from runtime.tui import run_terminal_view
+
+    stop = asyncio.Event()
+
+    def snapshot() -> Mapping[str, object]:
+        # "start" puts times on the mission's own axis, as the page shows them.
+        return {**feed.snapshot().to_json(), "start": feed.first_time}
+
+    clock = asyncio.get_running_loop().time  # the controller's clock: countdowns tick
+    task = asyncio.ensure_future(
+        run_terminal_view(snapshot, stop=stop, mission=feed.mission, clock=clock)
+    )
+    try:
+        yield
+    finally:
+        stop.set()
+        try:
+            await asyncio.wait_for(task, 5.0)  # cancels it after 5 s
+        except TimeoutError:
+            pass
+        except Exception as error:  # a view that broke never changes the run's result
+            print(f"coral-run: the terminal view stopped: {type(error).__name__}: {error}")
+
+
+# ---------------------------------------------------------------------- operate
+
+
+MAX_OPERATE_ANSWER = 64 * 1024
+"""The longest answer of ``/operate`` read (a coral server's is one short line)."""
+MAX_TOKEN_FILE = 4096
+
+
+def _operate(options: argparse.Namespace) -> int:
+    """``coral-run operate``: POST one action to a run's ``/operate``; print its answer."""
+    import http.client
+    import json
+    import os
+    import urllib.error
+    import urllib.request
+
+    host, port = options.address
+    where = f"{host}:{port}"
+    if options.action == "give" and not options.name:
+        print("coral-run operate: give needs the NAME of an input", file=sys.stderr)
+        return EXIT_USAGE
+    if options.action != "give" and options.name:
+        print(f"coral-run operate: {options.action} takes no NAME", file=sys.stderr)
+        return EXIT_USAGE
+    if port == 0:
+        print("coral-run operate: give the port the run serves on, not 0", file=sys.stderr)
+        return EXIT_USAGE
+    token = _operate_token(options, os.environ)
+    if token is not None and not (token.isascii() and token.isprintable() and " " not in token):
+        token = "coral-run operate: the operate token holds characters no token has"
+    if token is None or token.startswith("coral-run operate:"):
+        print(
+            token
+            or "coral-run operate: no operate token: give --token-file FILE, or --out DIR "
+            f"of the run (its {OPERATE_TOKEN_FILE}), or set {OPERATE_TOKEN_ENV}",
+            file=sys.stderr,
+        )
+        return EXIT_USAGE
+    body = json.dumps({"action": options.action, "input": options.name}).encode()
+    url_host = f"[{host}]" if ":" in host else host
+    request = urllib.request.Request(
+        f"http://{url_host}:{port}/operate",
+        data=body,
+        method="POST",
+        headers={
+            "Authorization": f"Bearer {token}",
+            "Content-Type": "application/json",
+            "X-Coral-Client": "cli",
+        },
+    )
+    try:
+        with urllib.request.urlopen(request, timeout=10) as response:
+            raw = response.read(MAX_OPERATE_ANSWER + 1)
+    except urllib.error.HTTPError as error:
+        print(f"coral-run operate: {where}: {_http_refusal(error)}", file=sys.stderr)
+        return EXIT_USAGE
+    except (urllib.error.URLError, OSError) as error:
+        reason = getattr(error, "reason", error)
+        print(f"coral-run operate: cannot reach {where}: {reason}", file=sys.stderr)
+        return EXIT_USAGE
+    except (http.client.HTTPException, ValueError) as error:  # not HTTP, a bad address
+        name = type(error).__name__
+        print(f"coral-run operate: {where} is not a coral watch server ({name})", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        if len(raw) > MAX_OPERATE_ANSWER:
+            raise ValueError("too long")
+        answer = json.loads(raw.decode("utf-8"))
+    except (ValueError, UnicodeDecodeError, RecursionError):
+        print(f"coral-run operate: {where} answered something that is not JSON", file=sys.stderr)
+        return EXIT_USAGE
+    if not isinstance(answer, dict) or not isinstance(answer.get("accepted"), bool):
+        print(f"coral-run operate: {where} answered without 'accepted'", file=sys.stderr)
+        return EXIT_USAGE
+    message = str(answer.get("message", ""))
+    if answer["accepted"]:
+        print(f"coral-run operate: {message}")
+        return EXIT_OK
+    print(f"coral-run operate: refused: {message}", file=sys.stderr)
+    return EXIT_MISSION_FAILED
+
+
+def _operate_token(options: argparse.Namespace, environ: Mapping[str, str]) -> str | None:
+    """The operate token: ``--token-file``, else the run's ``OUT/operate.token``, else
+    the environment; None when there is none, an error line when a file is unreadable."""
+    path: Path | None = options.token_file
+    try:
+        if path is None and (options.out / OPERATE_TOKEN_FILE).is_file():
+            path = options.out / OPERATE_TOKEN_FILE
+    except OSError as error:  # a folder we may not look into
+        return f"coral-run operate: cannot look for {OPERATE_TOKEN_FILE} in {options.out}: {error}"
+    if path is not None:
+        try:
+            with path.open("rb") as handle:
+                data = handle.read(MAX_TOKEN_FILE + 1)
+            if len(data) > MAX_TOKEN_FILE:
+                return f"coral-run operate: {path} is too large to be a token file"
+            token = data.decode("utf-8").strip()
+        except (OSError, UnicodeDecodeError) as error:
+            return f"coral-run operate: cannot read the token file {path}: {error}"
+        return token or f"coral-run operate: the token file {path} is empty"
+    token = environ.get(OPERATE_TOKEN_ENV, "").strip()
+    return token or None
+
+
+def _http_refusal(error: urllib.error.HTTPError) -> str:
+    """What an HTTP error status of ``/operate`` means to the operator."""
+    import json
+
+    detail = ""
+    try:
+        data = json.loads(error.read().decode("utf-8"))
+        if isinstance(data, dict):
+            detail = str(data.get("message") or data.get("error") or "")
+    except (ValueError, UnicodeDecodeError, OSError):
+        pass
+    meaning = {
+        401: "the operate token was refused",
+        403: "the token gives the view right only, not the operate right",
+        404: "this server takes no operator actions (a replay of a finished log?)",
+        413: "the request was too large",
+    }.get(error.code, f"HTTP {error.code}")
+    return meaning + (f" ({detail})" if detail else "")
 
 
 if __name__ == "__main__":

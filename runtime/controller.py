@@ -28,6 +28,11 @@
   them unacknowledged, so ``coral-run --resume`` consumes them. A second request gives
   up the wait at once.
 
+`Controller.operate` takes the operator's actions (``runtime.operator``: give an input
+the mission declares, pause, resume) from the live page or ``coral-run operate``, in the
+controller's own loop: each is logged as an ``operator`` event with its origin and whether
+it was accepted; the step it causes is logged, committed and sent exactly as a reply's.
+
 Console lines show the mission time, seconds since this run started (``t=12.3``), not
 the loop's raw clock.
 
@@ -46,9 +51,18 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import TypeVar
 
-from runtime.engine import Engine, EngineSpin, Firing, Outcome, SentCommand, StepResult
+from runtime.engine import (
+    Engine,
+    EngineSpin,
+    Firing,
+    OperatorRefused,
+    Outcome,
+    SentCommand,
+    StepResult,
+)
 from runtime.eventlog import EventLog, TelemetrySample
 from runtime.link import Connection, Link
+from runtime.operator import ACTIONS, OperatorAction, OperatorOutcome
 from runtime.protocol import (
     NONCE_SIZE,
     ClockSync,
@@ -175,6 +189,11 @@ class _Interrupted(Exception):
     """The operator asked the run to stop while the controller waited (`request_stop`)."""
 
 
+class _Woken(Exception):
+    """An operator action ended the mission (or spun the engine) while the controller
+    waited: the wait is abandoned so the run sees it at once (`Controller.operate`)."""
+
+
 class _Stopped(Exception):
     """The run was stopped during a live session, and make-safe was tried on it."""
 
@@ -270,6 +289,10 @@ class Controller:
         self._resend_due = 0  # the vehicle's last reply number, until its re-sends begin
         self._waiting: asyncio.Future[object] | None = None
         self._interrupt_pending = False
+        self._woken = 0  # operator actions that ended the mission while the run waited
+        self._failure: Exception | None = None  # an operator step the log could not take
+        self._live: tuple[Connection, StreamCodec] | None = None  # where commands go now
+        self._over = False  # `run` is past its end: no operator action is taken
 
     # ------------------------------------------------------------------ construction
 
@@ -377,6 +400,127 @@ class Controller:
         else:
             self._interrupt_pending = True
 
+    # ------------------------------------------------------------------ operator
+
+    async def operate(self, action: OperatorAction) -> OperatorOutcome:
+        """Take one operator action (give an input, pause, resume); says what happened.
+
+        Called in the controller's loop (the live server's handler awaits it), between
+        two steps of the run, never inside one. Each action is logged as an ``operator``
+        event with its origin and outcome, refused ones too; an accepted ``give`` or
+        ``resume`` is then handled as a reply is: its firings and commands are logged and
+        committed before any command is written, on the live connection, or, while the
+        link is down, on the next one (the commands are in flight in the engine's state).
+        An action that ends the mission wakes the run, which ends it the usual way.
+
+        A pause holds only the engine: replies are still consumed, acknowledged and
+        logged, heartbeats go on, and a command in flight may still time out.
+        """
+        if self._over:
+            return OperatorOutcome(False, "the run has ended")
+        now = self._now()
+        step: StepResult | None = None
+        spin: EngineSpin | None = None
+        try:
+            if self._stop_reason is not None:
+                raise OperatorRefused("the run is stopping; nothing more is done")
+            if self._spin is not None:
+                raise OperatorRefused("the engine spun: the run is ending")
+            if action.action not in ACTIONS:
+                raise OperatorRefused(
+                    f"unknown action {action.action!r} (expected {', '.join(ACTIONS)})"
+                )
+            if action.action == "give":
+                if not action.input:
+                    raise OperatorRefused("give needs the name of an input")
+                was_paused = self.engine.paused
+                step = self.engine.give(action.input, now)
+                message = f"input {action.input} given" + (
+                    "; the engine was paused: resumed, so the mission's response runs"
+                    if was_paused
+                    else ""
+                )
+            elif action.action == "pause":
+                self.engine.pause()
+                message = (
+                    "paused: no new command is sent until resume; replies are still "
+                    "consumed and logged"
+                )
+            else:
+                step = self.engine.resume(now)
+                message = "resumed"
+            accepted = True
+        except OperatorRefused as refused:
+            accepted, message = False, str(refused)
+        except EngineSpin as exc:
+            accepted, message, spin = True, f"{action.describe()} taken; {exc}", exc
+        self.log.event(
+            now,
+            "operator",
+            action=action.action,
+            input=action.input,
+            origin=action.origin,
+            accepted=accepted,
+            message=message,
+        )
+        self._console(
+            f"t={self._t(now):.1f} operator {action.describe()} from {action.origin}: "
+            + (message if accepted else f"refused: {message}")
+        )
+        if spin is not None:
+            self._on_spin(now, spin)  # logs the spin and commits; nothing is sent
+            self._wake()
+        elif step is None:
+            # A pause is part of the state a resumed run restores (`Engine.restore`).
+            self._commit() if accepted else self.log.commit(None)
+        else:
+            try:
+                self._log_step(now, step)
+                self._commit()
+            except Exception as error:
+                # The log cannot take the step (disk full, damaged file): as on a reply,
+                # the run must end on it, not go on with a state nobody can resume from.
+                # Nothing is sent; the run's loop raises it (`_goes_on`).
+                self._failure = error
+                self._wake()
+                return OperatorOutcome(False, f"the log cannot be written: {error}")
+            self._send_step(step)
+            if step.outcome is not Outcome.RUNNING:
+                self._wake()
+        return OperatorOutcome(accepted, message)
+
+    def _send_step(self, step: StepResult) -> None:
+        """Write an operator step's commands on the live connection, if there is one.
+
+        Without one (reconnecting, or mid-handshake) they stay in flight and the next
+        session sends them with the others; a write that fails leaves them so too."""
+        live = self._live
+        if live is None or self._result is None:
+            return
+        conn, codec = live
+        for sent in step.commands:
+            try:
+                self._send_command(conn, codec, sent, resend=sent.command_id in self._written)
+            except (ConnectionError, OSError):
+                # Close it so the session's reader sees the loss now (a half-dead socket
+                # may still read): the next session re-sends every command in flight.
+                conn.close()
+                return
+
+    def _wake(self) -> None:
+        """End the run's current wait: the mission ended (or spun) on an operator action."""
+        self._woken += 1
+        waiting = self._waiting
+        if waiting is not None and not waiting.done() and self._stop_reason is None:
+            waiting.cancel()
+
+    def _goes_on(self) -> bool:
+        """Whether the run goes on: the engine is running and has not spun; an operator
+        step the log could not take ends it with that error."""
+        if self._failure is not None:
+            raise self._failure
+        return self._spin is None and self.engine.outcome() is Outcome.RUNNING
+
     async def _interruptible(self, aw: Awaitable[T], timeout: float | None = None) -> T:
         """Await ``aw`` (within ``timeout``), or raise `_Interrupted` on a stop request.
 
@@ -391,6 +535,7 @@ class Controller:
         fut: asyncio.Future[T] = asyncio.ensure_future(aw)
         self._waiting = fut  # type: ignore[assignment]
         requests = self._stop_requests
+        woken = self._woken
         try:
             if timeout is None:
                 return await fut
@@ -398,8 +543,11 @@ class Controller:
         except asyncio.CancelledError:
             task = asyncio.current_task()
             outer = task is not None and task.cancelling() > 0
-            if fut.cancelled() and self._stop_requests > requests and not outer:
-                raise _Interrupted from None
+            if fut.cancelled() and not outer:
+                if self._stop_requests > requests:
+                    raise _Interrupted from None
+                if self._woken > woken:
+                    raise _Woken from None
             raise
         finally:
             if self._waiting is fut:
@@ -413,6 +561,7 @@ class Controller:
         result = self._result = RunResult(RunEnd.FINAL, {}, now, now)
         if self._spin is None:
             await self._run(result, now)
+        self._over = True
         if self._spin is not None:
             result.end = RunEnd.SPIN
             result.detail = str(self._spin)
@@ -459,12 +608,14 @@ class Controller:
         self._telemetry_port = port
         attempt = 0
         try:
-            while (outcome := self.engine.outcome()) is Outcome.RUNNING:
+            while self._goes_on():
                 if deadline is not None and self._now() >= deadline:
                     result.end = RunEnd.TIME_LIMIT
                     break
                 try:
                     conn = await self._interruptible(self.link.connect())
+                except _Woken:
+                    continue  # an operator action ended the mission
                 except ConnectionError as exc:
                     delay = self.options.reconnect_delays[
                         min(attempt, len(self.options.reconnect_delays) - 1)
@@ -475,23 +626,29 @@ class Controller:
                         f"cannot reach the vehicle ({exc}); retry in {delay:.1f} s",
                         reason=str(exc),
                     )
-                    await self._interruptible(asyncio.sleep(delay))
+                    with contextlib.suppress(_Woken):
+                        await self._interruptible(asyncio.sleep(delay))
                     continue
                 result.connections += 1
                 try:
                     await self._session(conn, port, deadline)
                     attempt = 0
+                except _Woken:
+                    pass  # an operator action ended the mission during this session
                 except _ConnectionLost as exc:
                     self._note("connection-lost", f"connection lost: {exc}", reason=str(exc))
                     attempt += 1
                     delay = self.options.reconnect_delays[
                         min(attempt - 1, len(self.options.reconnect_delays) - 1)
                     ]
-                    await self._interruptible(asyncio.sleep(delay))
+                    with contextlib.suppress(_Woken):
+                        await self._interruptible(asyncio.sleep(delay))
                 finally:
                     conn.close()
             else:
-                result.end = RunEnd.FINAL if outcome is Outcome.FINAL else RunEnd.DEADLOCK
+                if self._spin is None:
+                    outcome = self.engine.outcome()
+                    result.end = RunEnd.FINAL if outcome is Outcome.FINAL else RunEnd.DEADLOCK
         except _MissionLost as exc:
             result.end = RunEnd.VEHICLE_LOST_MISSION
             self._note("mission-lost", str(exc))
@@ -546,6 +703,10 @@ class Controller:
         self._commit()
         for sent in self.engine.in_flight():
             self._send_command(conn, codec, sent, resend=sent.command_id in self._written)
+        # From here on, commands an operator action causes go out on this connection at
+        # once; before (no connection, or the handshake), they wait in flight and the
+        # loop above sends them on the next connection: none is lost.
+        self._live = (conn, codec)
         self._console(
             f"t={self._t(now):.1f} connected (one-way delay {sync.delay * 1000:.0f} ms, "
             f"vehicle clock at {sync.to_vehicle(now):.3f} s); "
@@ -555,12 +716,14 @@ class Controller:
         try:
             await self._receive(conn, codec, deadline)
         except _Interrupted:
+            self._live = None
             assert self._result is not None
             self._result.made_safe = await self._make_safe(
                 conn, codec, self.options.make_safe_timeout
             )
             raise _Stopped from None
         finally:
+            self._live = None
             heartbeats.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await heartbeats
@@ -590,7 +753,7 @@ class Controller:
         silence = self.options.silence_limit
         status_every = self.options.status_interval
         next_status = self._now() + status_every
-        while self.engine.outcome() is Outcome.RUNNING:
+        while self._goes_on():
             now = self._now()
             if deadline is not None and now >= deadline:
                 return

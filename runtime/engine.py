@@ -4,7 +4,12 @@ The engine owns the marking. It reacts to one input at a time (the start of the 
 or one reply from the vehicle): it updates the marking, then, while an engine transition
 (plain or command) is enabled, chooses one by the policy, fires it and collects the
 commands it emits. Reply transitions are the vehicle's: they fire only when the vehicle's
-reply for that command arrives.
+reply for that command arrives. Input transitions are the operator's: they fire only when
+the operator gives that input (`Engine.give`), and never keep a run going by themselves.
+
+The operator may also `Engine.pause` the engine: it then fires none of its own
+transitions (so it sends no new command), while replies still fire their reply
+transitions; `Engine.resume` runs to quiescence from where it stands.
 
 A step costs what it touches, not the size of the net: after a firing only the
 transitions that consume from a place whose count changed are re-checked, and the
@@ -38,6 +43,7 @@ __all__ = [
     "EngineError",
     "EngineSpin",
     "Firing",
+    "OperatorRefused",
     "Outcome",
     "Policy",
     "SentCommand",
@@ -57,6 +63,12 @@ _SPIN_SHOWN = 12  # transitions of a cycle named in the message; a longer one is
 
 class EngineError(CoralError, RuntimeError):
     """The engine cannot go on: no passing certificate, a bad snapshot, a spin."""
+
+
+class OperatorRefused(EngineError):
+    """An operator action the engine does not take: an input the mission does not declare,
+    one already given, a run that has ended, a pause while paused. The message says which
+    and is what the operator sees; the engine is unchanged."""
 
 
 class Policy(enum.Enum):
@@ -285,6 +297,7 @@ class _Compiled:
     timeout: list[float | None]  # a command's time_out parameter, if it has one
     command: list[Command | None]
     reply_of: dict[tuple[int, str], int] = field(default_factory=dict)
+    input_of: dict[str, int] = field(default_factory=dict)  # operator input -> transition
 
 
 def _compile(net: Net) -> _Compiled:
@@ -294,6 +307,7 @@ def _compile(net: Net) -> _Compiled:
     inputs, outputs, gains, is_engine, priority = [], [], [], [], []
     timeouts: list[float | None] = []
     reply_of: dict[tuple[int, str], int] = {}
+    input_of: dict[str, int] = {}
     for i, tr in enumerate(net.transitions):
         ins = tuple((pindex[p], w) for p, w in tr.inputs)
         outs = tuple((pindex[p], w) for p, w in tr.outputs)
@@ -305,7 +319,9 @@ def _compile(net: Net) -> _Compiled:
         inputs.append(ins)
         outputs.append(outs)
         gains.append(tuple(p for p, d in delta.items() if d > 0))
-        engine = tr.kind is not TransitionKind.REPLY
+        # Reply transitions are the vehicle's and input transitions the operator's: the
+        # engine never chooses them, so they are not in its heap.
+        engine = tr.kind not in (TransitionKind.REPLY, TransitionKind.INPUT)
         is_engine.append(engine)
         priority.append(tr.priority)
         limit = dict(tr.command.params).get(TIME_OUT) if tr.command is not None else None
@@ -313,6 +329,9 @@ def _compile(net: Net) -> _Compiled:
         if engine:
             for p, _ in ins:
                 consumers[p].append(i)
+        elif tr.kind is TransitionKind.INPUT:
+            if tr.operator_input is not None:
+                input_of[tr.operator_input] = i
         elif tr.reply_to is not None and tr.reply is not None:
             reply_of[(tindex[tr.reply_to], tr.reply)] = i
     return _Compiled(
@@ -326,6 +345,7 @@ def _compile(net: Net) -> _Compiled:
         timeout=timeouts,
         command=[t.command for t in net.transitions],
         reply_of=reply_of,
+        input_of=input_of,
     )
 
 
@@ -373,13 +393,15 @@ class Engine:
         self._max_firings = max_firings_per_step
         self._c = _compile(net)
         self.marking: list[int] = list(net.initial_marking())
-        self._finals = {tuple(m) for m in net.final_markings()}
+        self._finals = net.final_test()
         self._in_flight: dict[int, _InFlight] = {}
         self._next_command_id = 1
         self.firings = 0
         self.checks = 0
         """Enabling checks done so far: the engine's unit of work (tests, benchmarks)."""
         self.started = False
+        self.paused = False
+        """Paused by the operator: the engine fires none of its own transitions."""
         self._heap: list[tuple[int, int]] = []
         self._queued: list[bool] = []
         self._requeue_all()
@@ -418,10 +440,12 @@ class Engine:
         return self.net.marking_dict(self.marking)
 
     def outcome(self) -> Outcome:
-        """Running while anything is enabled or in flight; then final or deadlock."""
+        """Running while an engine transition is enabled (also while paused) or a command
+        is in flight; then final or deadlock. Operator inputs not given keep no run going
+        (`Net.runs_on`)."""
         if self._in_flight or self._peek() is not None:
             return Outcome.RUNNING
-        return Outcome.FINAL if tuple(self.marking) in self._finals else Outcome.DEADLOCK
+        return Outcome.FINAL if self._finals.matches(self.marking) else Outcome.DEADLOCK
 
     def snapshot(self) -> dict[str, object]:
         """The engine's state as JSON-ready data; `restore` rebuilds the engine from it."""
@@ -435,6 +459,8 @@ class Engine:
             "next_command_id": self._next_command_id,
             "firings": self.firings,
             "started": self.started,
+            # Only when paused, so states written before pauses existed read the same.
+            **({"paused": True} if self.paused else {}),
         }
 
     @classmethod
@@ -448,6 +474,11 @@ class Engine:
         seed: int = 0,
     ) -> Engine:
         """The engine as `snapshot` left it (after a crash, from the event log).
+
+        A paused engine stays paused: the snapshot records the operator's hold (the
+        controller commits it when the pause is taken), so a controller restarted after
+        a crash or a stop never sends the next command of a mission its operator held;
+        the operator resumes it (``coral-run operate ... resume``).
 
         Raises:
             EngineError: the snapshot is of another net, or does not fit this one.
@@ -478,6 +509,7 @@ class Engine:
             engine._next_command_id = next_id
             engine.firings = firings
             engine.started = bool(state.get("started", True))
+            engine.paused = state.get("paused") is True
         except (KeyError, AssertionError, TypeError, ValueError) as exc:
             raise EngineError(f"the saved engine state is damaged ({exc!r})") from None
         problem = engine._inconsistency()
@@ -566,11 +598,79 @@ class Engine:
         self._fire(reply)
         return self._run(now, [Firing(self._c.names[reply], now, command_id)])
 
+    # ------------------------------------------------------------------ operator
+
+    def give(self, name: str, now: float) -> StepResult:
+        """The operator gives input ``name``: fire its input transition, then every engine
+        transition it enables, to quiescence (like a reply).
+
+        Offered once per run and only while the run goes on (`outcome` is RUNNING): an
+        input does not revive a run that has ended. Giving an input while paused resumes
+        the engine first (``paused`` becomes False): an operator who aborts wants the
+        abort path to run, not to wait for a resume that may never come.
+
+        Raises:
+            OperatorRefused: the mission declares no such input, it was already given,
+                the mission has not started or the run has ended; nothing changed.
+            EngineSpin: more than ``max_firings_per_step`` firings: a cycle.
+        """
+        index = self._c.input_of.get(name)
+        if index is None:
+            declared = ", ".join(sorted(self._c.input_of))
+            raise OperatorRefused(
+                f"the mission declares no input '{name}'"
+                + (f" (its inputs: {declared})" if declared else " (it declares no inputs)")
+            )
+        if not self.started:
+            raise OperatorRefused(f"input '{name}' refused: the mission has not started")
+        outcome = self.outcome()
+        if outcome is not Outcome.RUNNING:
+            raise OperatorRefused(f"input '{name}' refused: the run has ended ({outcome.value})")
+        if not self._enabled(index):
+            raise OperatorRefused(f"input '{name}' was already given (once per run)")
+        self.paused = False
+        self._fire(index)
+        return self._run(now, [Firing(self._c.names[index], now)])
+
+    def pause(self) -> None:
+        """Hold the engine: from now on it fires none of its own transitions, so it sends
+        no new command; replies still fire their reply transitions (`on_reply`).
+
+        Raises:
+            OperatorRefused: already paused, not started, or the run has ended.
+        """
+        if self.paused:
+            raise OperatorRefused("already paused")
+        if not self.started:
+            raise OperatorRefused("pause refused: the mission has not started")
+        outcome = self.outcome()
+        if outcome is not Outcome.RUNNING:
+            raise OperatorRefused(f"pause refused: the run has ended ({outcome.value})")
+        self.paused = True
+
+    def resume(self, now: float) -> StepResult:
+        """Release a pause: run every engine transition enabled now to quiescence.
+
+        Raises:
+            OperatorRefused: not paused, or the run ended while paused (a reply left
+                nothing to do): there is nothing to resume.
+            EngineSpin: more than ``max_firings_per_step`` firings: a cycle.
+        """
+        if not self.paused:
+            raise OperatorRefused("not paused")
+        outcome = self.outcome()
+        if outcome is not Outcome.RUNNING:
+            raise OperatorRefused(f"resume refused: the run has ended ({outcome.value})")
+        self.paused = False
+        return self._run(now, [])
+
     def _unexpected(self, command_id: int, kind: str, reason: str) -> StepResult:
         return StepResult((), (), self.outcome(), UnexpectedReply(command_id, kind, reason))
 
     def _run(self, now: float, firings: list[Firing]) -> StepResult:
         commands: list[SentCommand] = []
+        if self.paused:  # the operator holds the engine: the step ends with its input
+            return StepResult(tuple(firings), (), self.outcome())
         names, command_of = self._c.names, self._c.command
         choose, fire, limit = self._choose, self._fire, self._max_firings
         count = 0

@@ -15,6 +15,12 @@
 
 Both sides log to SQLite in ``out_dir`` (``controller.sqlite``; ``vehicle.sqlite`` when
 the vehicle is ours), and the timeline plots are drawn from the two logs.
+
+``RunConfig.companions`` run beside the controller, whichever the vehicle: async context
+managers entered (in order) just before ``controller.run()`` and exited after it, on
+error and on a stop too. ``coral-run --watch`` and ``--tui`` are companions (the live
+page with its operator actions, the terminal view); they need real time, since under
+virtual time nothing outside the mission would ever get a turn.
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ import os
 import random
 import secrets
 import signal
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -42,10 +48,22 @@ from runtime.vehicle.model import VehicleModel
 if TYPE_CHECKING:
     from coral_lang.net import Net
 
-__all__ = ["RunConfig", "controller_log_path", "open_for_resume", "resume_mission", "run_mission"]
+__all__ = [
+    "Companion",
+    "RunConfig",
+    "controller_log_path",
+    "open_for_resume",
+    "resume_mission",
+    "run_mission",
+]
 
 CONTROLLER_LOG = "controller.sqlite"
 VEHICLE_LOG = "vehicle.sqlite"
+
+
+Companion = Callable[[Controller], contextlib.AbstractAsyncContextManager[object]]
+"""Something that runs beside a controller (a live server, a terminal view): given the
+controller, an async context manager entered before its run and exited after it."""
 
 
 def controller_log_path(out_dir: Path) -> Path:
@@ -80,6 +98,8 @@ class RunConfig:
             simulated run without ``--key-file``): the logs are written unauthenticated,
             since nobody could ever verify them, and such a run may resume an
             unauthenticated log (with a warning), against a simulated vehicle only.
+        companions: entered in order around ``controller.run()`` (`Companion`), exited
+            in reverse order after it, also when it fails or is stopped.
     """
 
     out_dir: Path
@@ -98,6 +118,7 @@ class RunConfig:
     faults: FaultPlan | None = None
     telemetry_host: str | None = None
     log_key_ephemeral: bool = False
+    companions: Sequence[Companion] = ()
 
 
 def _log_key(config: RunConfig) -> bytes | None:
@@ -391,14 +412,52 @@ def _stop_signals(controller: Controller) -> Iterator[None]:
                 signal.signal(sig, previous)
 
 
+async def _run_controller(config: RunConfig, controller: Controller) -> RunResult:
+    """``controller.run()`` with the run's companions around it and the stop signals on."""
+    async with _companions(config.companions, controller, config.console):
+        with _stop_signals(controller):
+            return await controller.run()
+
+
+@contextlib.asynccontextmanager
+async def _companions(
+    companions: Sequence[Companion], controller: Controller, console: Callable[[str], None]
+) -> AsyncIterator[None]:
+    """Enter each companion in order; exit them in reverse, however the block ends.
+
+    A companion that fails *on exit* (a viewer, a terminal that went away) is reported on
+    the console and never replaces the run's result; one that fails on entry stops the
+    run before it goes on (bad usage, such as an address that cannot be bound)."""
+    async with contextlib.AsyncExitStack() as stack:
+        for companion in companions:
+            await stack.enter_async_context(_exit_reported(companion(controller), console))
+        yield
+
+
+@contextlib.asynccontextmanager
+async def _exit_reported(
+    inner: contextlib.AbstractAsyncContextManager[object], console: Callable[[str], None]
+) -> AsyncIterator[None]:
+    await inner.__aenter__()
+    try:
+        yield
+    except BaseException as error:
+        if not await inner.__aexit__(type(error), error, error.__traceback__):
+            raise
+    else:
+        try:
+            await inner.__aexit__(None, None, None)
+        except Exception as error:
+            console(f"coral-run: after the run: {type(error).__name__}: {error}")
+
+
 async def _remote(config: RunConfig, make: MakeController, host: str, port: int) -> RunResult:
     link = SocketLink(
         host, port, _emulator(config), log=config.console, telemetry_host=config.telemetry_host
     )
     try:
         controller = make(link, asyncio.get_running_loop().time(), os.urandom)
-        with _stop_signals(controller):
-            return await controller.run()
+        return await _run_controller(config, controller)
     finally:
         await link.aclose()
 
@@ -443,8 +502,7 @@ async def _simulated(
             link = MemoryLink(server, _emulator(config), log=config.console)
         try:
             controller = make(link, loop.time(), controller_rng.randbytes)
-            with _stop_signals(controller):
-                return await controller.run()
+            return await _run_controller(config, controller)
         finally:
             await link.aclose()
     finally:

@@ -24,6 +24,7 @@ on what is only decoration.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
@@ -38,7 +39,15 @@ from coral_lang.profile import (
 )
 from runtime.timeline import CONTROLLER, Command, MergedTimeline, commands_of
 
-__all__ = ["Phase", "PlotContext", "Waypoint", "plot_context", "vehicle_profile"]
+__all__ = [
+    "Phase",
+    "PlotContext",
+    "Waypoint",
+    "find_profile",
+    "param_metres",
+    "plot_context",
+    "vehicle_profile",
+]
 
 _SAME_POINT_M: Final = 1e-6
 
@@ -103,8 +112,15 @@ def plot_context(timeline: MergedTimeline, profile: VehicleProfile | None = None
 
 def vehicle_profile(timeline: MergedTimeline) -> VehicleProfile | None:
     """The profile of the net's vehicle: one the run's meta names, else the bundled one."""
-    wanted = timeline.vehicle_name
-    recorded = timeline.meta.get("profiles")
+    return find_profile(timeline.vehicle_name, timeline.meta)
+
+
+def find_profile(wanted: str | None, meta: Mapping[str, object]) -> VehicleProfile | None:
+    """The profile of vehicle ``wanted``: one of the files a log's ``meta["profiles"]``
+    names (the first readable one when ``wanted`` is None), else the bundled profile of
+    ``wanted``; None when there is none. Shared with the watch page (`runtime.watch.info`),
+    which has a log's meta and net but no merged timeline."""
+    recorded = meta.get("profiles")
     candidates: list[VehicleProfile] = []
     if isinstance(recorded, list):
         for item in recorded:
@@ -140,12 +156,19 @@ def _waypoints(commands: list[Command], profile: VehicleProfile | None) -> list[
 
 
 def _metres(command: Command, name: str, profile: VehicleProfile | None) -> float | None:
+    return param_metres(command.name, command.params, name, profile)
+
+
+def param_metres(
+    command: str, params: Mapping[str, object], name: str, profile: VehicleProfile | None
+) -> float | None:
     """Parameter ``name`` of ``command`` in metres: logged in the profile's unit, which is
-    converted when the profile says it is a length (USV way-points are in km)."""
-    value = command.params.get(name)
+    converted when the profile says it is a length (USV way-points are in km). None when
+    the parameter is missing or not a finite number."""
+    value = params.get(name)
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         return None
-    spec = None if profile is None else profile.command(command.name)
+    spec = None if profile is None else profile.command(command)
     param = None if spec is None else spec.param(name)
     unit = None if param is None else param.unit
     if unit is not None and units.dimension(unit) == "length":

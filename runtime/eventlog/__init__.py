@@ -40,8 +40,9 @@ import json
 import math
 import os
 import sqlite3
+import sys
 import threading
-from collections.abc import Collection, Iterator, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -58,6 +59,7 @@ __all__ = [
     "Event",
     "EventLog",
     "EventLogError",
+    "Listener",
     "LogRole",
     "TelemetrySample",
     "log_key",
@@ -186,6 +188,10 @@ class TelemetrySample:
     psi: float
     est_x: float | None = None
     est_y: float | None = None
+
+
+Listener: TypeAlias = "Callable[[Event | TelemetrySample], None]"
+"""Called by the writer with each event or sample as it will be stored (`add_listener`)."""
 
 
 # --- JSON -----------------------------------------------------------------------------------
@@ -455,6 +461,12 @@ class EventLog:
         # event and sample, kept in memory so an append costs the same at any length.
         self._key: bytes | None = None
         self._chain = ChainState(b"", 0, 0, 0, 0)
+        # In-process observers of the rows written (`add_listener`); a tuple, replaced
+        # whole, so calling them never holds the lock and an empty one costs one test.
+        self._listeners: tuple[Listener, ...] = ()
+        # What to call when a listener is dropped for raising (by id; the entry keeps the
+        # listener alive so its id cannot be reused while registered).
+        self._on_drop: dict[int, tuple[Listener, Callable[[BaseException], None]]] = {}
 
     # --- opening ----------------------------------------------------------------------------
 
@@ -815,11 +827,15 @@ class EventLog:
             raise EventLogError(f"{self.path}: an event needs a kind")
         moment = _finite(time, f"the time of event {kind!r}", self.path)
         try:
-            text = _dumps(_jsonable(data, "data"))
+            plain = _jsonable(data, "data")
+            text = _dumps(plain)
         except _NotJson as bad:
             raise bad.error(f"{self.path}: event {kind!r}: ") from None
         with self._lock:
             self._events.append((moment, str(kind), text))
+            seq = self._chain.event_seq + len(self._events)
+        if self._listeners:  # `plain` is what JSON gives back, and this call's own copy
+            self._tell(Event(seq, moment, str(kind), plain))  # type: ignore[arg-type]
 
     def telemetry(self, sample: TelemetrySample) -> None:
         """Buffer one telemetry sample; it is written by the next `commit` (or `close`).
@@ -841,6 +857,102 @@ class EventLog:
         )
         with self._lock:
             self._samples.append(row)
+        if self._listeners:
+            nan = math.nan
+            x, y, z, psi = (nan if v is None else v for v in row[2:6])
+            self._tell(TelemetrySample(moment, row[1], x, y, z, psi, row[6], row[7]))
+
+    def add_listener(
+        self,
+        listener: Listener,
+        *,
+        replay: bool = False,
+        on_drop: Callable[[BaseException], None] | None = None,
+    ) -> Callable[[], None]:
+        """Call ``listener`` with every event and sample logged from now on; returns the
+        function that removes it.
+
+        Why: a live viewer of the run (`runtime.watch.feed`) wants each row the moment the
+        engine logs it, without polling the file. The listener is called synchronously, in
+        the writer's thread, right after `event` or `telemetry` buffered the row, with the
+        row as a reader will get it back once committed (``seq`` included, the data as
+        JSON returns it, NaN poses as NaN): so it must be tiny, it runs in the engine's
+        path. This is in-process only; nothing of it reaches the file. A listener that
+        raises is reported once on stderr and dropped, so it can never break logging;
+        ``on_drop`` (if given) is then called with the error, so the listener's owner
+        learns it no longer hears the log instead of silently freezing (a live view
+        would otherwise go on claiming to be live). An ``on_drop`` that raises is
+        ignored. With no listener, logging costs one test more.
+
+        ``replay=True`` first gives the listener every row the log already holds,
+        committed or buffered, in order (events, then samples), before this returns: a
+        viewer attached after the mission started (or to a resumed one) starts from its
+        beginning, and misses nothing in between. Call it from the writer's thread.
+
+        Raises:
+            EventLogError: with ``replay``, a stored row is damaged (as `events` would).
+        """
+        rows: list[Event | TelemetrySample] = []
+        with self._lock:
+            if replay:
+                rows = self._rows_so_far()
+            self._listeners = (*self._listeners, listener)
+            if on_drop is not None:
+                self._on_drop[id(listener)] = (listener, on_drop)
+
+        def remove() -> None:
+            self._listeners = tuple(known for known in self._listeners if known is not listener)
+            self._forget(listener)
+
+        for row in rows:
+            listener(row)
+        return remove
+
+    def _rows_so_far(self) -> list[Event | TelemetrySample]:
+        """Every row stored or buffered, as readers get them back (caller holds the lock)."""
+        db = self._connection()
+        try:
+            stored = db.execute("SELECT seq, time, kind, data FROM events ORDER BY seq").fetchall()
+            numbered = db.execute(
+                "SELECT time, seq, x, y, z, psi, est_x, est_y FROM telemetry ORDER BY n"
+            ).fetchall()
+        except sqlite3.Error as error:
+            raise _explain(self.path, "read the log", error) from None
+        rows: list[Event | TelemetrySample] = [self._event(*row) for row in stored]
+        first = self._chain.event_seq + 1
+        rows.extend(
+            Event(seq, moment, kind, json.loads(text))
+            for seq, (moment, kind, text) in enumerate(self._events, first)
+        )
+        nan = math.nan
+        for time, seq, *pose in [*numbered, *self._samples]:
+            x, y, z, psi = (nan if v is None else v for v in pose[:4])
+            rows.append(TelemetrySample(time, seq, x, y, z, psi, pose[4], pose[5]))
+        return rows
+
+    def _forget(self, listener: Listener) -> Callable[[BaseException], None] | None:
+        """Drop ``listener``'s ``on_drop``; the callback it had, if any."""
+        entry = self._on_drop.get(id(listener))
+        if entry is None or entry[0] is not listener:
+            return None
+        del self._on_drop[id(listener)]
+        return entry[1]
+
+    def _tell(self, row: Event | TelemetrySample) -> None:
+        for listener in self._listeners:
+            try:
+                listener(row)
+            except Exception as error:  # a viewer must never break the log
+                self._listeners = tuple(known for known in self._listeners if known is not listener)
+                print(
+                    f"{self.path}: event-log listener {listener!r} failed and was removed: "
+                    f"{type(error).__name__}: {error}",
+                    file=sys.stderr,
+                )
+                on_drop = self._forget(listener)
+                if on_drop is not None:
+                    with contextlib.suppress(Exception):  # nor may its owner's callback
+                        on_drop(error)
 
     @property
     def pending(self) -> int:

@@ -1,5 +1,8 @@
 """``coral-run watch LOG [--watch [HOST:]PORT]``: serve a log's page until Ctrl-C.
 
+The server of a running mission (``coral-run MISSION --watch``, with the operate right) is
+`runtime.watch.live`; this one reads the log file, so it only views.
+
 Why a separate process reading the log rather than a hook in the engine: the log is already
 the mission's record (committed, WAL, readable while written), so a viewer that reads it can
 never slow down or disturb the run, and the same page replays a finished mission.
@@ -11,15 +14,10 @@ import asyncio
 import sys
 from pathlib import Path
 
-from coral_lang.diagnostics import CoralError
-from runtime.watch.server import DEFAULT_HOST, Watch, WatchServer
+from runtime.watch.server import DEFAULT_HOST, Watch, WatchError, WatchServer, static_info
 from runtime.watch.source import LogReader
 
-__all__ = ["WatchError", "parse_address", "watch"]
-
-
-class WatchError(CoralError):
-    """The server cannot start (the address is taken, or not this machine's): bad usage."""
+__all__ = ["WatchError", "log_info", "parse_address", "watch"]
 
 
 def parse_address(text: str) -> tuple[str, int]:
@@ -41,9 +39,9 @@ def watch(log: Path, host: str, port: int, *, poll_interval: float = 0.5) -> int
     `EventLogError` (a `CoralError`) before anything listens."""
     reader = LogReader(log)
     try:
-        view = Watch(reader)
+        view = Watch(reader, poll_interval=poll_interval)
         view.poll()  # everything committed so far, before the first viewer arrives
-        asyncio.run(_serve(view, host, port, poll_interval))
+        asyncio.run(_serve(view, host, port, log_info(reader)))
     except KeyboardInterrupt:
         print("coral-run watch: stopped", file=sys.stderr)
     finally:
@@ -51,12 +49,17 @@ def watch(log: Path, host: str, port: int, *, poll_interval: float = 0.5) -> int
     return 0
 
 
-async def _serve(view: Watch, host: str, port: int, poll_interval: float) -> None:
+def log_info(reader: LogReader) -> dict[str, object]:
+    """The page's static data (`runtime.watch.info.page_info`) of a log's header."""
+    return static_info(reader.net_json, {"mission": reader.mission, **reader.meta})
+
+
+async def _serve(view: Watch, host: str, port: int, info: dict[str, object]) -> None:
     server = WatchServer(
         view,
         host=host,
         port=port,
-        poll_interval=poll_interval,
+        info=info,
         on_error=lambda line: print(f"coral-run watch: {line}", file=sys.stderr),
     )
     try:
@@ -67,6 +70,7 @@ async def _serve(view: Watch, host: str, port: int, poll_interval: float) -> Non
     print(f"coral-run watch: {view.reader.path} ({state}) at {url}", flush=True)
     if server.token is not None:
         print("coral-run watch: the URL holds the access token (view right); it is shown once")
+    print("coral-run watch: a log's server cannot operate the mission (no operate right)")
     try:
         await asyncio.Event().wait()
     finally:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import socket
+import threading
 import tracemalloc
 from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
@@ -13,6 +14,7 @@ from pathlib import Path
 import aiohttp
 
 from runtime.eventlog import EventLog
+from runtime.watch.main import log_info
 from runtime.watch.server import Hub, Slot, Watch, WatchServer, needs_token
 from runtime.watch.source import LogReader
 from runtime.watch.state import snapshot_at
@@ -31,6 +33,7 @@ def run(test: Callable[[], Awaitable[None]]) -> None:
 
 
 async def serving(watch: Watch, **options: object) -> WatchServer:
+    options.setdefault("info", log_info(watch.reader))
     server = WatchServer(watch, port=0, **options)  # type: ignore[arg-type]
     await server.start()
     return server
@@ -69,6 +72,10 @@ def test_a_finished_log_is_replayed(pool_log: Path) -> None:
                         assert reply.status == 400
                 async with client.get(f"{base}health") as reply:
                     assert (await reply.json())["ok"] is True
+                async with client.get(f"{base}info") as reply:  # the log's static data
+                    info = await reply.json()
+                assert info["mission"] == reader.mission and "<svg" in info["net_svg"]
+                assert server.payload() is server.payload()  # serialised once per version
                 async with client.post(f"{base}snapshot", data=b"x" * 10_000) as reply:
                     assert reply.status in (405, 413)
                 long_header = {"X-Padding": "x" * 6000}  # under aiohttp's 8190, over ours
@@ -93,7 +100,8 @@ def test_a_live_log_is_followed_until_mission_end(tmp_path: Path) -> None:
     watch.poll()
 
     async def test() -> None:
-        server = await serving(watch, poll_interval=0.02)
+        watch.poll_interval = 0.02
+        server = await serving(watch)
         try:
             async with (
                 aiohttp.ClientSession() as client,
@@ -212,7 +220,7 @@ def test_a_stalled_viewer_does_not_grow_memory(pool_log: Path) -> None:
         stalled.setblocking(False)
         try:
             await asyncio.get_running_loop().sock_connect(stalled, ("127.0.0.1", server.port))
-            request = b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n"
+            request = b"GET /events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"
             await asyncio.get_running_loop().sock_sendall(stalled, request)
             for _ in range(100):  # the handler has joined the hub
                 if server.hub.viewers:
@@ -238,3 +246,153 @@ def test_a_stalled_viewer_does_not_grow_memory(pool_log: Path) -> None:
         run(test)
     finally:
         reader.close()
+
+
+class CountingSource:
+    """A `Source` that counts its documents, and whose replays wait for ``release``."""
+
+    mission = "m"
+    ended = False
+    seq = 0
+
+    def __init__(self) -> None:
+        self.version = 0
+        self.newest = 0
+        self.replays: list[str] = []
+        self.release = threading.Event()
+
+    def document(self, t: float | None = None) -> dict[str, object]:
+        if t is None:
+            self.newest += 1
+            return {"mission": self.mission, "version": self.version}
+        self.replays.append(threading.current_thread().name)
+        assert self.release.wait(5)
+        return {"mission": self.mission, "t": t}
+
+    async def follow(self, publish: Callable[[], None], on_error: Callable[[str], None]) -> None:
+        return None
+
+
+def test_snapshot_and_info_are_serialised_once_per_version() -> None:
+    source = CountingSource()
+
+    async def test() -> None:
+        server = WatchServer(source, port=0, info={"mission": "m", "net_svg": "<svg/>"})
+        url = await server.start()
+        try:
+            async with aiohttp.ClientSession() as client:
+                for _ in range(20):
+                    async with client.get(f"{url}snapshot") as reply:
+                        assert await reply.json() == {"mission": "m", "version": 0}
+                assert source.newest == 1  # one serialisation for twenty requests
+                source.version = 1
+                async with client.get(f"{url}snapshot") as reply:
+                    assert (await reply.json())["version"] == 1
+                assert source.newest == 2
+                async with client.get(f"{url}info") as reply:
+                    first = await reply.read()
+                server.info["mission"] = "changed"  # served bytes are the first ones
+                async with client.get(f"{url}info") as reply:
+                    assert await reply.read() == first
+                    assert reply.content_type == "application/json"
+        finally:
+            await server.stop()
+
+    run(test)
+
+
+def test_one_replay_at_a_time_on_its_own_thread() -> None:
+    source = CountingSource()
+
+    async def test() -> None:
+        server = WatchServer(source, port=0)
+        url = await server.start()
+        try:
+            async with aiohttp.ClientSession() as client:
+                first = asyncio.create_task(client.get(f"{url}snapshot?t=1"))
+                for _ in range(200):  # the first replay is running
+                    if source.replays:
+                        break
+                    await asyncio.sleep(0.01)
+                async with client.get(f"{url}snapshot?t=2") as second:
+                    assert second.status == 503
+                    assert "already being computed" in await second.text()
+                async with client.get(f"{url}snapshot") as newest:  # not a replay: served
+                    assert newest.status == 200
+                source.release.set()
+                reply = await first
+                assert reply.status == 200 and (await reply.json())["t"] == 1.0
+                reply.release()
+                async with client.get(f"{url}snapshot?t=3") as third:
+                    assert (await third.json())["t"] == 3.0
+            assert len(source.replays) == 2
+            assert all(name.startswith("coral-watch-replay") for name in source.replays)
+        finally:
+            source.release.set()
+            await server.stop()
+
+    run(test)
+
+
+def test_without_a_token_only_requests_for_this_machine_are_answered() -> None:
+    """DNS rebinding: a page of evil.example whose name now resolves to 127.0.0.1 sends
+    ``Host: evil.example``; served without a token, only local names are answered."""
+
+    async def test() -> None:
+        server = WatchServer(CountingSource(), port=0)
+        url = await server.start()
+        port = server.port
+        try:
+            async with aiohttp.ClientSession() as client:
+                for host in (
+                    "evil.example",
+                    f"evil.example:{port}",
+                    f"127.0.0.1:{port + 1}",
+                    "127.0.0.1.evil.example",
+                    f"[::2]:{port}",
+                    "::1",
+                    "",
+                ):
+                    async with client.get(f"{url}health", headers={"Host": host}) as reply:
+                        assert reply.status == 421, host
+                        assert "Host header" in await reply.text()
+                for host in (
+                    f"127.0.0.1:{port}",
+                    "127.0.0.1",
+                    f"localhost:{port}",
+                    "LocalHost",
+                    f"[::1]:{port}",
+                    "[::1]",
+                ):
+                    async with client.get(f"{url}health", headers={"Host": host}) as reply:
+                        assert reply.status == 200, host
+                async with client.get(f"{url}health") as reply:  # aiohttp's own Host
+                    assert reply.status == 200
+        finally:
+            await server.stop()
+
+    run(test)
+
+
+def test_with_a_token_any_host_name_may_be_used() -> None:
+    async def test() -> None:
+        server = WatchServer(CountingSource(), host="127.0.0.2", port=0)
+        await server.start()
+        base = f"http://127.0.0.2:{server.port}/"
+        try:
+            async with aiohttp.ClientSession() as client:
+                headers = {"Host": "watch.example", "Authorization": f"Bearer {server.token}"}
+                async with client.get(f"{base}health", headers=headers) as reply:
+                    assert reply.status == 200
+        finally:
+            await server.stop()
+
+    run(test)
+
+
+def test_reserved_slots_are_for_operators_only() -> None:
+    hub = Hub(max_viewers=4, reserved=2)
+    assert hub.join() is not None and hub.join() is not None
+    assert hub.join() is None  # the rest is reserved
+    assert hub.join(operator=True) is not None and hub.join(operator=True) is not None
+    assert hub.join(operator=True) is None and hub.viewers == 4

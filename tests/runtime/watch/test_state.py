@@ -148,7 +148,18 @@ def test_bookkeeping_of_commands_link_and_end() -> None:
     [command] = snap.commands
     assert command["status"] == "awaiting reply" and command["sends"] == 2
     assert command["sent_at"] == 1.0
-    assert snap.link == {"handshakes": 1, "reconnects": 1, "rejected": 1, "telemetry-lost": 1}
+    assert snap.link == {
+        "handshakes": 1,
+        "reconnects": 1,
+        "rejected": 1,
+        "telemetry-lost": 1,
+        "resends": 0,
+        "round_trip": 0.2,
+        "reply_after": None,
+        "outages": 1,
+        "outage_seconds": 2.0,  # from the reconnect at 2 s to the log's time, 4 s: still out
+        "in_outage": True,
+    }
     assert snap.telemetry == {
         "time": 6.0,
         "vehicle_time": 16.0,
