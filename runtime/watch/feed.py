@@ -33,7 +33,7 @@ from runtime.watch.state import Snapshot, WatchState, clock_rate
 
 __all__ = ["PUBLISH_INTERVAL", "LiveFeed"]
 
-PUBLISH_INTERVAL: Final = 0.2
+PUBLISH_INTERVAL: Final = 0.5
 """Seconds between two publications to viewers at most (mission-end comes at once)."""
 
 
