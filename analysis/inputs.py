@@ -25,7 +25,7 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-from coral_lang.net import Net, TransitionKind
+from coral_lang.net import Net, Transition, TransitionKind
 
 BoolArray = npt.NDArray[np.bool_]
 IntArray = npt.NDArray[np.int64]
@@ -37,37 +37,37 @@ def input_flags(net: Net) -> BoolArray:
 
 
 def has_inputs(net: Net) -> bool:
-    """Whether ``net`` has operator inputs (INPUT transitions)."""
+    """Whether ``net`` has operator inputs (INPUT transitions; by kind, since a net built
+    by hand may leave ``operator_input`` unset, where `Net.inputs` would miss them)."""
     return any(t.kind is TransitionKind.INPUT for t in net.transitions)
+
+
+def _enabled_rows(net: Net, block: npt.NDArray[np.integer], t: Transition) -> BoolArray:
+    """Which rows of ``block`` (markings, ``(n, places)``) enable ``t``."""
+    ok = np.ones(int(block.shape[0]), dtype=np.bool_)
+    for place, weight in t.inputs:
+        ok &= block[:, net.place_index(place)] >= weight
+    return ok
 
 
 def terminal_rows(net: Net, block: npt.NDArray[np.integer]) -> BoolArray:
     """Which rows of ``block`` (markings, ``(n, places)``) are terminal: no transition
     other than an operator input is enabled there."""
-    n = int(block.shape[0])
-    live = np.zeros(n, dtype=np.bool_)
+    live = np.zeros(int(block.shape[0]), dtype=np.bool_)
     for t in net.transitions:
-        if t.kind is TransitionKind.INPUT:
-            continue
-        ok = np.ones(n, dtype=np.bool_)
-        for place, weight in t.inputs:
-            ok &= block[:, net.place_index(place)] >= weight
-        live |= ok
+        if t.kind is not TransitionKind.INPUT:
+            live |= _enabled_rows(net, block, t)
     return ~live
 
 
 def input_edges_at(net: Net, block: npt.NDArray[np.integer], terminal: BoolArray) -> int:
     """How many (marking, enabled input) pairs of ``block`` sit at a ``terminal`` row:
     the P/T edges the run rule removes."""
-    count = 0
-    for t in net.transitions:
-        if t.kind is not TransitionKind.INPUT:
-            continue
-        ok = terminal.copy()
-        for place, weight in t.inputs:
-            ok &= block[:, net.place_index(place)] >= weight
-        count += int(ok.sum())
-    return count
+    return sum(
+        int((terminal & _enabled_rows(net, block, t)).sum())
+        for t in net.transitions
+        if t.kind is TransitionKind.INPUT
+    )
 
 
 def legal_trace(net: Net, trace: Sequence[int]) -> list[int] | None:
@@ -78,8 +78,7 @@ def legal_trace(net: Net, trace: Sequence[int]) -> list[int] | None:
     repeatedly. ``None`` when that is impossible: an input fires first and the initial
     marking is terminal (then no input can ever fire)."""
     steps = list(trace)
-    kinds = [t.kind for t in net.transitions]
-    if TransitionKind.INPUT not in kinds:
+    if not has_inputs(net):
         return steps
     k = 0
     markings = [net.initial_marking()]

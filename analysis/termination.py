@@ -135,11 +135,12 @@ class FinalPatterns:
     @classmethod
     def of(cls, net: Net) -> FinalPatterns:
         """The projected finals of ``net``."""
-        columns = net.final_columns()
-        patterns = net.final_patterns()
+        test = net.final_test()
+        columns = test.columns
+        patterns = net.final_patterns()  # declaration order (the test's set has none)
         return cls(
             np.array(columns, dtype=np.int64),
-            np.array(net.armed_columns(), dtype=np.int64),
+            np.array(test.armed, dtype=np.int64),
             # Explicit shape: with no columns, reshape(-1, 0) cannot infer the rows.
             np.array(patterns, dtype=np.int64).reshape(len(patterns), len(columns)),
         )

@@ -14,6 +14,7 @@ a plain P/T net and every analysis applies unchanged.
 from __future__ import annotations
 
 import enum
+import functools
 import hashlib
 import itertools
 import json
@@ -370,11 +371,14 @@ class Net:
         return result
 
     def final_test(self) -> FinalTest:
-        """The declared finals in projected form, built once for callers that test
-        many markings (the runtime engine after every step)."""
-        return FinalTest(
-            self.final_columns(), self.armed_columns(), frozenset(self.final_patterns())
-        )
+        """The declared finals in projected form, built once per net (`is_final` is
+        asked of every marking a temporal check evaluates, the engine after every step)."""
+        return self._final_test
+
+    @functools.cached_property
+    def _final_test(self) -> FinalTest:
+        columns, armed = self.final_columns(), self.armed_columns()
+        return FinalTest(columns, armed, frozenset(self.final_patterns()))
 
     def is_final(self, marking: Iterable[int]) -> bool:
         """Whether ``marking`` is one of the declared final markings: its projection on

@@ -3,7 +3,9 @@ about two seconds), and the net it carries rebuilt independently of `runtime.wat
 
 from __future__ import annotations
 
+import asyncio
 import json
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 import pytest
@@ -13,6 +15,20 @@ from runtime.cli import main as coral_run
 from tests.conftest import EXAMPLES
 
 POOL_MISSION = EXAMPLES / "pool_mission" / "pool_mission.coral"
+
+NET = json.dumps(
+    {
+        "name": "n",
+        "places": [["a", 1, "mission", None, [], None, None]],
+        "transitions": [{"name": "go", "inputs": [["a", 1]], "outputs": [["b", 2]]}],
+    }
+)
+"""A one-transition net as a log's header carries it, for the servers' tests."""
+
+
+def run(test: Callable[[], Awaitable[None]]) -> None:
+    """Run one async test body, bounded: a server test must never hang the suite."""
+    asyncio.run(asyncio.wait_for(test(), timeout=10))
 
 
 @pytest.fixture(scope="session")

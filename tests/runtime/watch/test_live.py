@@ -11,7 +11,7 @@ import os
 import socket
 import stat
 import threading
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -24,18 +24,7 @@ from runtime.watch.feed import LiveFeed
 from runtime.watch.live import LiveWatch, TokenFile, serve_live
 from runtime.watch.server import Watch, WatchError, WatchServer
 from runtime.watch.source import LogReader
-
-NET = json.dumps(
-    {
-        "name": "n",
-        "places": [["a", 1, "mission", None, [], None, None]],
-        "transitions": [{"name": "go", "inputs": [["a", 1]], "outputs": [["b", 2]]}],
-    }
-)
-
-
-def run(test: Callable[[], Awaitable[None]]) -> None:
-    asyncio.run(asyncio.wait_for(test(), timeout=10))
+from tests.runtime.watch.conftest import NET, run
 
 
 class FakeRun:

@@ -8,7 +8,7 @@ import json
 import socket
 import threading
 import tracemalloc
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 
 import aiohttp
@@ -18,18 +18,7 @@ from runtime.watch.main import log_info
 from runtime.watch.server import Hub, Slot, Watch, WatchServer, needs_token
 from runtime.watch.source import LogReader
 from runtime.watch.state import snapshot_at
-
-NET = json.dumps(
-    {
-        "name": "n",
-        "places": [["a", 1, "mission", None, [], None, None]],
-        "transitions": [{"name": "go", "inputs": [["a", 1]], "outputs": [["b", 2]]}],
-    }
-)
-
-
-def run(test: Callable[[], Awaitable[None]]) -> None:
-    asyncio.run(asyncio.wait_for(test(), timeout=10))
+from tests.runtime.watch.conftest import NET, run
 
 
 async def serving(watch: Watch, **options: object) -> WatchServer:
