@@ -1062,14 +1062,16 @@ def frames_case(seed: int) -> tuple[str, str, bytes]:
     # Datagrams: telemetry mutated; accept() must never raise nor take an altered one.
     if not fresh_vehicle and ctrl.session_key is not None:
         receiver_d = p.DatagramReceiver(ctrl.session_key)
-        sent = [p.Telemetry(i + 1, float(i), 1.0, 2.0, 3.0, 4.0, None, 5.0) for i in range(3)]
+        sent = [
+            p.TelemetryRecord(float(i), 1.0, 2.0, 3.0, 4.0, None, 5.0, seq=i + 1) for i in range(3)
+        ]
         grams = [p.encode_datagram(ctrl.session_key, t) for t in sent]
         for g in [*grams, flip_bytes(rng, rng.choice(grams)), truncate(rng, grams[0]), grams[0]]:
             try:
                 got = receiver_d.accept(g)
             except Exception:
                 return "failure", "datagram accept raised:\n" + traceback.format_exc(), g
-            if isinstance(got, p.Telemetry) and g not in grams:
+            if isinstance(got, p.TelemetryRecord) and g not in grams:
                 return "failure", f"accepted an altered datagram: {got!r}", g
             if isinstance(got, p.Rejected):
                 rejected += 1

@@ -62,7 +62,7 @@ from runtime.controller import Controller, ControllerOptions, RunEnd
 from runtime.engine import Engine
 from runtime.eventlog import EventLog
 from runtime.link import MemoryLink
-from runtime.vehicle.model import Params, Reply, TelemetryState
+from runtime.vehicle.model import Params, Reply, TelemetryRecord
 from runtime.vehicle.server import VehicleServer
 from runtime.watch.feed import LiveFeed
 from runtime.watch.live import serve_live
@@ -131,9 +131,9 @@ class EchoVehicle:
     def make_safe(self, reason: str) -> list[Reply]:
         return []
 
-    def telemetry(self) -> TelemetryState:
+    def telemetry(self) -> TelemetryRecord:
         t = self._time
-        return TelemetryState(t, t % 50.0, 2.0, 1.0, 90.0, t % 50.0, 2.0)
+        return TelemetryRecord(t, t % 50.0, 2.0, 1.0, 90.0, t % 50.0, 2.0)
 
 
 @dataclass

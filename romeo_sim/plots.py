@@ -56,8 +56,8 @@ def plot_run(
     folder.mkdir(parents=True, exist_ok=True)
     if not recorder.telemetry:
         raise ValueError("nothing to plot: the recorder holds no telemetry")
-    start = recorder.telemetry[0].time
-    end = recorder.telemetry[-1].time
+    start = recorder.telemetry[0].vehicle_time
+    end = recorder.telemetry[-1].vehicle_time
     written = plot_window(recorder, folder / stem, start, end, "whole mission", targets, dock, pool)
     for index, (name, t0, t1) in enumerate(phases, start=1):
         slug = re.sub(r"[^a-z0-9]+", "_", name.lower()).strip("_")
@@ -85,7 +85,7 @@ def plot_window(
     pool: tuple[float, float] | None = None,
 ) -> list[Path]:
     """One figure over [start, end] s; writes ``base``.png and ``base``.svg."""
-    samples = [t for t in recorder.telemetry if start - 1e-9 <= t.time <= end + 1e-9]
+    samples = [t for t in recorder.telemetry if start - 1e-9 <= t.vehicle_time <= end + 1e-9]
     fig = plt.figure(figsize=(13.0, 8.5))
     grid = fig.add_gridspec(5, 2, width_ratios=(2.2, 1.0), hspace=0.12, wspace=0.18)
     events_ax = fig.add_subplot(grid[0:2, 0])
@@ -96,19 +96,19 @@ def plot_window(
     fig.suptitle(f"ROMEO pool mission: {title} ({start:.0f}-{end:.0f} s)")
 
     _draw_events(events_ax, recorder, start, end)
-    times = [t.time for t in samples]
-    est = [t for t in samples if t.x_est is not None]
-    est_times = [t.time for t in est]
-    x_est = [t.x_est for t in est if t.x_est is not None]
-    y_est = [t.y_est for t in est if t.y_est is not None]
+    times = [t.vehicle_time for t in samples]
+    est = [t for t in samples if t.est_x is not None]
+    est_times = [t.vehicle_time for t in est]
+    est_xs = [t.est_x for t in est if t.est_x is not None]
+    est_ys = [t.est_y for t in est if t.est_y is not None]
     xy_ax.plot(times, [t.x for t in samples], color="tab:blue", label="x true")
     xy_ax.plot(times, [t.y for t in samples], color="tab:orange", label="y true")
-    xy_ax.plot(est_times, x_est, "--", color="tab:blue", label="x est.")
-    xy_ax.plot(est_times, y_est, "--", color="tab:orange", label="y est.")
+    xy_ax.plot(est_times, est_xs, "--", color="tab:blue", label="x est.")
+    xy_ax.plot(est_times, est_ys, "--", color="tab:orange", label="y est.")
     xy_ax.set_ylabel("x, y [m]")
     xy_ax.legend(loc="upper left", fontsize="x-small", ncols=4)
     depth_ax.plot(times, [t.z for t in samples], color="tab:blue", label="true")
-    depth_ax.plot(times, [t.z_est for t in samples], "--", color="tab:cyan", label="est.")
+    depth_ax.plot(times, [t.est_z for t in samples], "--", color="tab:cyan", label="est.")
     depth_ax.invert_yaxis()
     depth_ax.set_ylabel("depth [m]")
     depth_ax.legend(loc="upper right", fontsize="x-small", ncols=2)
@@ -176,7 +176,7 @@ def _draw_track(
         length, width = pool
         ax.plot([0, width, width, 0, 0], [0, 0, length, length, 0], color="black", lw=1.2)
     ax.plot([t.y for t in samples], [t.x for t in samples], color="tab:blue", label="true")
-    ax.plot([t.y_est for t in est], [t.x_est for t in est], "--", color="tab:red", label="estimate")
+    ax.plot([t.est_y for t in est], [t.est_x for t in est], "--", color="tab:red", label="estimate")
     if samples:
         ax.plot(samples[0].y, samples[0].x, "o", color="tab:blue", ms=5)
     if targets:

@@ -20,6 +20,10 @@ from romeo_sim.vehicle import Reply, Telemetry, Vehicle, VehicleEvent
 
 __all__ = ["CommandRecord", "Recorder"]
 
+TELEMETRY_COLUMNS = tuple(f.name for f in dataclasses.fields(Telemetry) if f.name != "seq")
+"""The exported telemetry fields: the snapshot's, without ``seq``, which only a datagram
+has (the simulator's samples are not numbered)."""
+
 
 @dataclass(frozen=True)
 class CommandRecord:
@@ -103,7 +107,7 @@ class Recorder:
     def to_dict(self) -> dict[str, Any]:
         """Everything, as plain JSON-ready data."""
         return {
-            "telemetry": [dataclasses.asdict(t) for t in self.telemetry],
+            "telemetry": [{k: getattr(t, k) for k in TELEMETRY_COLUMNS} for t in self.telemetry],
             "commands": [
                 {
                     "time": c.time,
@@ -130,7 +134,7 @@ class Recorder:
         data = self.to_dict()
         written: list[Path] = []
         headers = {
-            "telemetry": [f.name for f in dataclasses.fields(Telemetry)],
+            "telemetry": list(TELEMETRY_COLUMNS),
             "commands": ["time", "command_id", "command", "params"],
             "replies": [f.name for f in dataclasses.fields(Reply)],
             "events": [f.name for f in dataclasses.fields(VehicleEvent)],

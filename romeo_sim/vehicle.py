@@ -57,6 +57,7 @@ from romeo_sim.tasks import (
     SrmTask,
     Task,
 )
+from runtime.telemetry import TelemetryRecord
 from runtime.vehicle.model import Reply
 
 __all__ = ["SUPPORTED_COMMANDS", "Reply", "Telemetry", "Vehicle", "VehicleEvent"]
@@ -92,22 +93,18 @@ class VehicleEvent:
 
 
 @dataclass(frozen=True)
-class Telemetry:
-    """A snapshot of the vehicle: truth and estimate side by side.
+class Telemetry(TelemetryRecord):
+    """A snapshot of the vehicle: the telemetry record, plus the simulator's own truth.
 
+    The fields of `runtime.telemetry.TelemetryRecord` (what a datagram carries, and what
+    the vehicle server sends and logs of it) come first; ROMEO adds its depth and heading
+    estimates, speeds, thrusts and the task holding each resource, for plots and tests.
     Positions in m (x north, y east, z depth), headings in degrees in [0, 360) clockwise
-    from north, speeds in m/s and deg/s. ``x_est``/``y_est`` are None before FIX_XY.
+    from north, speeds in m/s and deg/s. ``est_x``/``est_y`` are None before FIX_XY.
     """
 
-    time: float
-    x: float
-    y: float
-    z: float
-    psi: float
-    x_est: float | None
-    y_est: float | None
-    z_est: float = 0.0
-    psi_est: float = 0.0
+    est_z: float = 0.0
+    est_psi: float = 0.0
     u: float = 0.0
     v: float = 0.0
     w: float = 0.0
@@ -614,15 +611,15 @@ class Vehicle:
             return "" if task is None else task.label()
 
         return Telemetry(
-            time=self.state_time,
+            vehicle_time=self.state_time,
             x=body.x,
             y=body.y,
             z=body.z,
             psi=math.degrees(body.psi) % 360.0,
-            x_est=ekf.x if nav.has_fix else None,
-            y_est=ekf.y if nav.has_fix else None,
-            z_est=nav.z,
-            psi_est=math.degrees(nav.psi) % 360.0,
+            est_x=ekf.x if nav.has_fix else None,
+            est_y=ekf.y if nav.has_fix else None,
+            est_z=nav.z,
+            est_psi=math.degrees(nav.psi) % 360.0,
             u=body.u,
             v=body.v,
             w=body.w,

@@ -60,7 +60,7 @@ from runtime.engine import (
     SentCommand,
     StepResult,
 )
-from runtime.eventlog import EventLog, TelemetrySample
+from runtime.eventlog import EventLog
 from runtime.link import Connection, Link
 from runtime.operator import ACTIONS, OperatorAction, OperatorOutcome
 from runtime.protocol import (
@@ -80,7 +80,7 @@ from runtime.protocol import (
     Role,
     StreamCodec,
     StreamMessage,
-    Telemetry,
+    TelemetryRecord,
 )
 
 __all__ = ["Controller", "ControllerOptions", "RunEnd", "RunResult"]
@@ -1092,20 +1092,9 @@ class Controller:
         if receiver is None or result is None:
             return
         item = receiver.accept(data)
-        if isinstance(item, Telemetry):
+        if isinstance(item, TelemetryRecord):
             result.telemetry += 1
-            self.log.telemetry(
-                TelemetrySample(
-                    item.vehicle_time,
-                    item.seq,
-                    item.x,
-                    item.y,
-                    item.z,
-                    item.psi,
-                    item.est_x,
-                    item.est_y,
-                )
-            )
+            self.log.telemetry(item)  # the record decoded is the record logged
         else:
             result.telemetry_rejected += 1
             if item.reason is not RejectReason.LATE:

@@ -33,6 +33,7 @@ import enum
 import math
 import random
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 from runtime.linkprofile import LinkProfile
 
@@ -53,18 +54,40 @@ class Direction(enum.Enum):
     DOWN = "vehicle->controller"
 
 
+Instant = TypeVar("Instant", int, float)
+"""The clock an outage is measured on: a schedule's integer milliseconds (exact, for
+replays and shrinking) or the emulator's seconds."""
+
+
 @dataclass(frozen=True)
-class Outage:
-    """The link is down from ``start`` to ``end`` (seconds on the caller's clock)."""
+class Outage(Generic[Instant]):
+    """The link is down from ``start`` for ``length``, on the caller's clock.
 
-    start: float
-    end: float
+    One class for both users: the link emulator draws outages in float seconds
+    (``Outage[float]``), a `runtime.schedule.Schedule` lists them in integer milliseconds
+    (``Outage[int]``); the arithmetic is the same, and so is the meaning of ``end``.
 
-    def covers(self, t: float) -> bool:
+    Raises:
+        ValueError: a negative ``start`` or ``length``.
+    """
+
+    start: Instant
+    length: Instant
+
+    def __post_init__(self) -> None:
+        if min(self.start, self.length) < 0:
+            raise ValueError(f"an outage needs start and length >= 0, got {self}")
+
+    @property
+    def end(self) -> Instant:
+        """When the link is back."""
+        return self.start + self.length
+
+    def covers(self, t: Instant) -> bool:
         """True if the link is down at ``t``."""
         return self.start <= t < self.end
 
-    def overlaps(self, t0: float, t1: float) -> bool:
+    def overlaps(self, t0: Instant, t1: Instant) -> bool:
         """True if the link is down at any time in ``[t0, t1]``."""
         return self.start <= t1 and t0 < self.end
 
@@ -86,7 +109,7 @@ class DatagramFate:
     arrivals: tuple[float, ...]
     lost_to: str | None = None
     reordered: bool = False
-    outage: Outage | None = None
+    outage: Outage[float] | None = None
 
     @property
     def lost(self) -> bool:
@@ -120,7 +143,7 @@ class StreamPath:
         established_at: float,
         ends_at: float,
         end_cause: str | None,
-        outage: Outage | None,
+        outage: Outage[float] | None,
     ) -> None:
         self._emulator = emulator
         self.number = number
@@ -157,7 +180,7 @@ class ConnectAttempt:
 
     latency: float
     path: StreamPath | None
-    outage: Outage | None = None
+    outage: Outage[float] | None = None
 
     @property
     def ok(self) -> bool:
@@ -186,7 +209,7 @@ class LinkEmulator:
         self._outage_rng = child("outage")
         self._sample_rng = child("samples")
         self._line_free = {d: -math.inf for d in Direction}
-        self._outages: list[Outage] = []
+        self._outages: list[Outage[float]] = []
         self._outage_starts: list[float] = []
         self._outage_ends: list[float] = []
         self._outage_origin: float | None = None
@@ -283,12 +306,12 @@ class LinkEmulator:
 
     # ------------------------------------------------------------------ outages
 
-    def outage_at(self, t: float) -> Outage | None:
+    def outage_at(self, t: float) -> Outage[float] | None:
         """The outage in progress at ``t``, if any."""
         outage = self.outage_between(t, t)
         return outage if outage is not None and outage.covers(t) else None
 
-    def outage_between(self, t0: float, t1: float) -> Outage | None:
+    def outage_between(self, t0: float, t1: float) -> Outage[float] | None:
         """The first outage that overlaps ``[t0, t1]``, if any."""
         self._extend(t0, t1)
         # Outages never overlap, so their ends increase: find the first to end after t0.
@@ -297,7 +320,7 @@ class LinkEmulator:
             return self._outages[i]
         return None
 
-    def next_outage(self, after: float) -> Outage | None:
+    def next_outage(self, after: float) -> Outage[float] | None:
         """The first outage starting at or after ``after`` (None if outages never happen)."""
         if self.profile.outage_rate_per_s <= 0.0:
             return None
@@ -319,7 +342,8 @@ class LinkEmulator:
         t = self._outages[-1].end if self._outages else self._outage_origin
         while not self._outages or self._outages[-1].start <= until:
             start = t + rng.expovariate(p.outage_rate_per_s)
-            t = start + rng.uniform(p.outage_min_s, p.outage_max_s)
-            self._outages.append(Outage(start, t))
+            outage = Outage(start, rng.uniform(p.outage_min_s, p.outage_max_s))
+            t = outage.end
+            self._outages.append(outage)
             self._outage_starts.append(start)
             self._outage_ends.append(t)

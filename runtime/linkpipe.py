@@ -323,7 +323,7 @@ class EmulatedLink:
         self.emulator = emulator
         self.stats = LinkStats()
         self._log = log
-        self._seen_outages: set[Outage] = set()
+        self._seen_outages: set[Outage[float]] = set()
         # Insertion-ordered (not a set), so tear-down happens in the same order every run.
         self._live: dict[EmulatedConnection, None] = {}
         self._numbers = 0
@@ -393,7 +393,7 @@ class EmulatedLink:
                 f"{in_flight}"
             )
 
-    def _note_outage(self, outage: Outage, what: str) -> None:
+    def _note_outage(self, outage: Outage[float], what: str) -> None:
         """Count and log an outage the first time it shows (later effects are counted)."""
         if outage in self._seen_outages:
             return
@@ -402,7 +402,7 @@ class EmulatedLink:
         self._log(
             f"link: outage from t={self._mission_time(outage.start):.1f} s "
             f"to t={self._mission_time(outage.end):.1f} s "
-            f"({outage.end - outage.start:.1f} s): {what}"
+            f"({outage.length:.1f} s): {what}"
         )
 
     def _shutdown_all(self) -> None:

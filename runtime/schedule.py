@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 from coral_lang.diagnostics import CoralError
 from coral_lang.net import Command, Net
 from coral_lang.profile import TIME_OUT, VehicleProfile, load_bundled_profile
+from runtime.emulator import Outage
 from runtime.engine import Engine, Firing, Outcome, SentCommand, StepResult, UnexpectedReply
 
 __all__ = [
@@ -102,39 +103,18 @@ class MessageFate:
 
 
 @dataclass(frozen=True)
-class Outage:
-    """The link is down from ``start_ms`` for ``length_ms`` (schedule time)."""
-
-    start_ms: int
-    length_ms: int
-
-    def __post_init__(self) -> None:
-        if min(self.start_ms, self.length_ms) < 0:
-            raise ValueError(f"an outage needs start and length >= 0, got {self}")
-
-    @property
-    def end_ms(self) -> int:
-        """When the link is back."""
-        return self.start_ms + self.length_ms
-
-    def covers(self, t_ms: int) -> bool:
-        """True if the link is down at ``t_ms``."""
-        return self.start_ms <= t_ms < self.end_ms
-
-
-@dataclass(frozen=True)
 class Schedule:
     """The fate of every command, by the order it was sent, and the link's outages.
 
     Attributes:
         messages: ``messages[i]`` is the fate of the (i+1)-th command sent (command id
             i + 1); commands beyond the list get ``default``.
-        outages: when the link is down.
+        outages: when the link is down, in the schedule's milliseconds.
         default: the fate of the commands ``messages`` does not cover.
     """
 
     messages: tuple[MessageFate, ...] = ()
-    outages: tuple[Outage, ...] = ()
+    outages: tuple[Outage[int], ...] = ()
     default: MessageFate = field(default_factory=MessageFate)
 
     def fate(self, index: int) -> MessageFate:
@@ -148,7 +128,7 @@ class Schedule:
             moved = False
             for outage in self.outages:
                 if outage.covers(t_ms):
-                    t_ms = outage.end_ms
+                    t_ms = outage.end
                     moved = True
         return t_ms
 
@@ -159,7 +139,7 @@ class Schedule:
             for i, fate in enumerate(self.messages)
             if fate != MessageFate()
         ]
-        lines += [f"outage from {o.start_ms} ms for {o.length_ms} ms" for o in self.outages]
+        lines += [f"outage from {o.start} ms for {o.length} ms" for o in self.outages]
         return "\n".join(lines) or "every command nominal, no outage"
 
 

@@ -67,11 +67,11 @@ def message_fates(
     )
 
 
-def outages(*, horizon_ms: int = 600_000, max_length_ms: int = 20_000) -> st.SearchStrategy[Outage]:
+def outages(
+    *, horizon_ms: int = 600_000, max_length_ms: int = 20_000
+) -> st.SearchStrategy[Outage[int]]:
     """One outage starting within ``horizon_ms`` of the mission's start."""
-    return st.builds(
-        Outage, start_ms=st.integers(0, horizon_ms), length_ms=st.integers(0, max_length_ms)
-    )
+    return st.builds(Outage, start=st.integers(0, horizon_ms), length=st.integers(0, max_length_ms))
 
 
 def schedules(

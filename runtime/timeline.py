@@ -28,7 +28,6 @@ here needs a ``mission-end`` event or a closed log.
 from __future__ import annotations
 
 import bisect
-import dataclasses
 import itertools
 import json
 import math
@@ -39,7 +38,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
-from runtime.eventlog import Event, EventLog, EventLogError, TelemetrySample
+from runtime.eventlog import Event, EventLog, EventLogError
+from runtime.telemetry import TelemetryRecord
 
 if TYPE_CHECKING:
     from runtime.timeline_plots import PlotContext
@@ -82,8 +82,10 @@ class MergedTimeline:
         events: ``(time, source, event)`` sorted by time, ``time`` on the controller's
             clock, ``source`` ``"controller"`` or ``"vehicle"``; ``event`` is as logged
             (a vehicle event keeps its own clock in ``event.time``).
-        samples: telemetry on the controller's clock, sorted by time: the vehicle log's
-            (every sample sent) when it has any, else those the controller received.
+        samples: ``(time, sample)`` sorted by time, ``time`` on the controller's clock;
+            ``sample`` is as logged (it keeps the vehicle's clock in ``vehicle_time``).
+            The vehicle log's (every sample sent) when it has any, else those the
+            controller received.
         offset: the first handshake's offset (vehicle clock minus controller clock, the
             INIT estimate of the paper), or None when the controller logged no handshake.
         mission: the mission both logs belong to (the controller's name for it).
@@ -102,7 +104,7 @@ class MergedTimeline:
     """
 
     events: list[tuple[float, str, Event]]
-    samples: list[TelemetrySample]
+    samples: list[tuple[float, TelemetryRecord]]
     offset: float | None
     mission: str
     offsets: list[tuple[float, float]] = field(default_factory=list)
@@ -125,7 +127,7 @@ class MergedTimeline:
                 return time
         firsts = [self.events[0][0]] if self.events else []
         if self.samples:
-            firsts.append(self.samples[0].time)
+            firsts.append(self.samples[0][0])
         return min(firsts, default=0.0)
 
     @property
@@ -133,7 +135,7 @@ class MergedTimeline:
         """The last event or sample (controller clock)."""
         lasts = [self.events[-1][0]] if self.events else []
         if self.samples:
-            lasts.append(self.samples[-1].time)
+            lasts.append(self.samples[-1][0])
         return max(lasts, default=self.start)
 
     @property
@@ -155,7 +157,7 @@ class _Loaded:
     role: str
     mission: str
     events: list[Event]
-    samples: list[TelemetrySample]
+    samples: list[TelemetryRecord]
     meta: dict[str, object]
     net_json: str | None
     net_digest: str | None
@@ -228,14 +230,12 @@ def merge_logs(paths: Sequence[str | Path]) -> MergedTimeline:
     events.sort(key=lambda item: (item[0], rank[item[1]], item[2].seq))
 
     source: str | None = None
-    raw: list[TelemetrySample] = []
+    raw: list[TelemetryRecord] = []
     if vehicle is not None and vehicle.samples:
         source, raw = VEHICLE, vehicle.samples
     elif controller.samples:
         source, raw = CONTROLLER, controller.samples
-    samples = sorted(
-        (dataclasses.replace(s, time=to_controller(s.time)) for s in raw), key=lambda s: s.time
-    )
+    samples = sorted(((to_controller(s.vehicle_time), s) for s in raw), key=lambda item: item[0])
     logs = {CONTROLLER: controller.path}
     if vehicle is not None:
         logs[VEHICLE] = vehicle.path
@@ -453,15 +453,13 @@ def commands_of(timeline: MergedTimeline) -> list[Command]:
     return [commands[key] for key in sorted(commands)]
 
 
-def telemetry_gaps(
-    samples: Sequence[TelemetrySample], minimum: float = 1.0
-) -> list[tuple[float, float]]:
+def telemetry_gaps(times: Sequence[float], minimum: float = 1.0) -> list[tuple[float, float]]:
     """Holes in the telemetry as ``(time of the last sample before, length)``.
 
+    ``times`` are the samples' times in order (a merged timeline's controller-clock times).
     A hole is an interval longer than ``minimum`` seconds and three times the median interval,
     so a slow but steady rate is not reported as gaps.
     """
-    times = [s.time for s in samples]
     steps = [b - a for a, b in itertools.pairwise(times)]
     if not steps:
         return []
@@ -550,7 +548,7 @@ def _telemetry_line(timeline: MergedTimeline, start: float) -> str:
     line = f"telemetry: {len(timeline.samples)} samples ({timeline.sample_source} log)"
     if timeline.sample_source == VEHICLE and CONTROLLER in timeline.logs:
         line += f", {timeline.received_samples} received by the controller"
-    gaps = telemetry_gaps(timeline.samples)
+    gaps = telemetry_gaps([time for time, _ in timeline.samples])
     if not gaps:
         return line + "; no gaps"
     shown = ", ".join(f"at {t - start:.1f} s ({length:.1f} s long)" for t, length in gaps[:5])

@@ -26,7 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
-from runtime.eventlog import EventLogError, TelemetrySample
+from runtime.eventlog import EventLogError
+from runtime.telemetry import TelemetryRecord
 from runtime.timeline import (
     CONTROLLER,
     DPI,
@@ -404,7 +405,7 @@ def _x_limits(timeline: MergedTimeline) -> tuple[float, float]:
         0.0, (timeline.events[0][0] if timeline.events else timeline.start) - timeline.start
     )
     if timeline.samples:
-        begin = min(begin, timeline.samples[0].time - timeline.start)
+        begin = min(begin, timeline.samples[0][0] - timeline.start)
     end = max(timeline.end - timeline.start, begin + 1.0)
     margin = 0.02 * (end - begin)
     return begin - margin, end + margin
@@ -443,20 +444,18 @@ def continuous_heading(values: Sequence[float]) -> list[float]:
     return [v + shift for v in out]
 
 
-def _broken(
-    samples: Sequence[TelemetrySample], values: Sequence[float]
-) -> tuple[list[float], list[float]]:
+def _broken(times: Sequence[float], values: Sequence[float]) -> tuple[list[float], list[float]]:
     """Times and values with NaN at each telemetry gap, so lines are not drawn across it."""
-    gaps = {t for t, _ in telemetry_gaps(samples)}
-    times: list[float] = []
+    gaps = {t for t, _ in telemetry_gaps(times)}
+    out_times: list[float] = []
     out: list[float] = []
-    for sample, value in zip(samples, values, strict=True):
-        times.append(sample.time)
+    for time, value in zip(times, values, strict=True):
+        out_times.append(time)
         out.append(value)
-        if sample.time in gaps:
-            times.append(sample.time)
+        if time in gaps:
+            out_times.append(time)
             out.append(math.nan)
-    return times, out
+    return out_times, out
 
 
 def draw_telemetry(
@@ -464,7 +463,8 @@ def draw_telemetry(
 ) -> dict[str, Any]:
     """Draw the telemetry on ``fig``; return its axes by name (xy, depth, heading, track)."""
     start = timeline.start
-    samples = timeline.samples
+    sample_times = [time for time, _ in timeline.samples]
+    samples = [sample for _, sample in timeline.samples]
     grid = fig.add_gridspec(
         3, 2, width_ratios=(2.2, 1.0), left=0.07, right=0.97, top=0.92, bottom=0.07, hspace=0.1
     )
@@ -475,11 +475,11 @@ def draw_telemetry(
     source = f"{timeline.sample_source} log" if timeline.sample_source else "no telemetry"
     fig.suptitle(f"mission {timeline.mission}: telemetry ({source})", fontsize="medium")
 
-    def series(value: Callable[[TelemetrySample], float | None]) -> list[float]:
+    def series(value: Callable[[TelemetryRecord], float | None]) -> list[float]:
         return [math.nan if (got := value(s)) is None else got for s in samples]
 
     def shifted(values: Sequence[float]) -> tuple[list[float], list[float]]:
-        times, out = _broken(samples, values)
+        times, out = _broken(sample_times, values)
         return [t - start for t in times], out
 
     xy_ax.plot(*shifted(series(lambda s: s.x)), color="tab:blue", label="x (north)")
@@ -533,7 +533,7 @@ def draw_telemetry(
         xy_ax.legend(loc="lower left", fontsize="x-small", ncols=4)
     else:
         xy_ax.text(0.5, 0.5, "no telemetry in the logs", transform=xy_ax.transAxes, ha="center")
-    _draw_track(track_ax, samples, context)
+    _draw_track(track_ax, timeline.samples, context)
     return {"xy": xy_ax, "depth": depth_ax, "heading": heading_ax, "track": track_ax}
 
 
@@ -558,8 +558,11 @@ def _heading_axis(ax: Any, heading: Sequence[float]) -> None:
     ax.set_ylabel("heading [deg]")
 
 
-def _draw_track(ax: Any, samples: Sequence[TelemetrySample], context: PlotContext) -> None:
+def _draw_track(
+    ax: Any, timed: Sequence[tuple[float, TelemetryRecord]], context: PlotContext
+) -> None:
     """North (x) up, east (y) to the right, as on a chart."""
+    samples = [sample for _, sample in timed]
     from matplotlib.patches import Rectangle
 
     space = context.workspace
@@ -577,7 +580,7 @@ def _draw_track(ax: Any, samples: Sequence[TelemetrySample], context: PlotContex
         )
     phases = _drawn_phases(context)
     if phases and samples:
-        times = [s.time for s in samples]
+        times = [time for time, _ in timed]
         for index, phase in enumerate(phases):
             first = bisect.bisect_left(times, phase.start)
             last = bisect.bisect_right(times, phase.end)

@@ -9,7 +9,8 @@ included), so a forbidden dependency fails here even when no test happens to exe
   never a vehicle implementation (``romeo_sim``, ``runtime.vehicle.generic``): it reaches
   simulated vehicles through ``runtime.vehicle.registry``, by name;
 * the vehicle side (``runtime.vehicle``, and the modules both sides share:
-  ``runtime.protocol``, ``runtime.eventlog``, ``runtime.faultplan``, ``runtime.keys``)
+  ``runtime.protocol`` (a package: every ``runtime.protocol.*`` module, by prefix),
+  ``runtime.eventlog``, ``runtime.telemetry``, ``runtime.faultplan``, ``runtime.keys``)
   imports ``coral_lang`` and itself only, so a vehicle can be built on it without the engine;
 * ``romeo_sim`` imports ``coral_lang`` and the vehicle side only.
 """
@@ -23,7 +24,13 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("coral_lang", "analysis", "runtime", "romeo_sim")
-SHARED = ("runtime.protocol", "runtime.eventlog", "runtime.faultplan", "runtime.keys")
+SHARED = (
+    "runtime.protocol",
+    "runtime.eventlog",
+    "runtime.telemetry",
+    "runtime.faultplan",
+    "runtime.keys",
+)
 VEHICLE_IMPLEMENTATIONS = ("romeo_sim", "runtime.vehicle.generic")
 
 
@@ -97,6 +104,7 @@ def _violations() -> list[str]:
     return problems
 
 
+@pytest.mark.slow
 def test_every_package_keeps_its_layer() -> None:
     assert _violations() == []
 
@@ -109,8 +117,18 @@ def test_every_package_keeps_its_layer() -> None:
         ("runtime.run", "romeo_sim.vehicle", False),
         ("runtime.run", "runtime.vehicle.generic", False),
         ("runtime.run", "runtime.vehicle.registry", True),
+        ("runtime.simvehicle", "romeo_sim.vehicle", False),
+        ("runtime.simvehicle", "runtime.vehicle.registry", True),
+        ("coral_lang.cliframe", "analysis.cli", False),
+        ("romeo_sim.cli", "coral_lang.cliframe", True),
         ("runtime.vehicle.server", "runtime.controller", False),
         ("runtime.protocol", "runtime.engine", False),
+        ("runtime.protocol.codec", "runtime.engine", False),
+        ("runtime.protocol.codec", "runtime.protocol.wire", True),
+        ("runtime.protocol.messages", "runtime.telemetry", True),
+        ("runtime.telemetry", "runtime.controller", False),
+        ("runtime.vehicle.model", "runtime.telemetry", True),
+        ("romeo_sim.vehicle", "runtime.telemetry", True),
         ("romeo_sim.server", "runtime.vehicle.server", True),
         ("romeo_sim.server", "runtime.controller", False),
         ("romeo_sim.scenario", "analysis.verify", False),

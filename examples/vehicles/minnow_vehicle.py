@@ -14,7 +14,7 @@ from pathlib import Path
 
 from coral_lang.profile import load_profile
 from runtime.keys import KeyProblem, load_psk
-from runtime.vehicle import HandlerVehicle, Job, Outcome, Refused, TelemetryState, run_vehicle
+from runtime.vehicle import HandlerVehicle, Job, Outcome, Refused, TelemetryRecord, run_vehicle
 
 PROFILE = Path(__file__).resolve().parents[1] / "profiles" / "minnow.yaml"
 
@@ -37,9 +37,9 @@ class FakeMinnow:
             self.x, self.y = self.goal if step >= 1.0 else (self.x + step * dx, self.y + step * dy)
         return self
 
-    def telemetry(self, now: float) -> TelemetryState:
+    def telemetry(self, now: float) -> TelemetryRecord:
         self.at(now)
-        return TelemetryState(now, self.x, self.y, self.z, self.psi % 360.0)
+        return TelemetryRecord(now, self.x, self.y, self.z, self.psi % 360.0)
 
     def set_depth(self, z: float) -> None:
         self.z_set = z

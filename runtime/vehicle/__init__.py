@@ -14,8 +14,7 @@ from runtime.vehicle.handlers import HandlerVehicle, Job, Outcome, Refused, chec
 from runtime.vehicle.model import (
     Params,
     Reply,
-    TelemetrySnapshot,
-    TelemetryState,
+    TelemetryRecord,
     VehicleModel,
 )
 from runtime.vehicle.server import ServerStats, VehicleServer, run_vehicle, serve_vehicle
@@ -28,8 +27,7 @@ __all__ = [
     "Refused",
     "Reply",
     "ServerStats",
-    "TelemetrySnapshot",
-    "TelemetryState",
+    "TelemetryRecord",
     "VehicleModel",
     "VehicleServer",
     "check_params",

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 from coral_lang.profile import TIME_OUT, CommandSpec, VehicleProfile
 from runtime.faultplan import FaultPlan, FaultRule
-from runtime.vehicle.model import Params, Reply, TelemetrySnapshot, VehicleModel
+from runtime.vehicle.model import Params, Reply, TelemetryRecord, VehicleModel
 
 __all__ = ["FaultInjector", "InjectedFault", "forced_delay"]
 
@@ -140,7 +140,7 @@ class FaultInjector:
         """Reset the wrapped vehicle's watchdog."""
         self.inner.heard_from_controller()
 
-    def telemetry(self) -> TelemetrySnapshot | None:
+    def telemetry(self) -> TelemetryRecord | None:
         """The wrapped vehicle's telemetry."""
         return self.inner.telemetry()
 

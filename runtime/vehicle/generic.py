@@ -23,7 +23,7 @@ Telemetry is a plausible pose, not physics: the vehicle moves at 1 m/s towards t
 ``x``/``y`` (or ``x1``/``y1``, the end of a line) given to a task, at 0.3 m/s towards the
 last ``z`` given to a task (0 after a task whose name contains ``SURFACE``, or after the
 watchdog or the controller's make-safe request), and heads along its horizontal motion
-unless a task gave a ``psi``. It has no navigation filter: ``x_est``/``y_est`` are None.
+unless a task gave a ``psi``. It has no navigation filter: ``est_x``/``est_y`` are None.
 """
 
 from __future__ import annotations
@@ -37,8 +37,8 @@ from coral_lang.diagnostics import ProfileError
 from coral_lang.profile import VehicleProfile
 from coral_lang.safefile import PROFILE_LIMIT, UnreadableFile, read_text_file
 from coral_lang.yamlsource import expect_keys, load_yaml
+from runtime.telemetry import TelemetryRecord
 from runtime.vehicle.handlers import HandlerVehicle, Job, Outcome
-from runtime.vehicle.model import TelemetryState
 from runtime.vehicle.registry import SimulatorError, SimulatorRequest
 
 __all__ = ["SIMULATOR", "GenericSimulator", "GenericVehicle", "load_generic_settings"]
@@ -160,9 +160,9 @@ class GenericVehicle(HandlerVehicle):
         if self._target_psi is not None:
             self._psi = self._target_psi
 
-    def _pose(self, now: float) -> TelemetryState:
+    def _pose(self, now: float) -> TelemetryRecord:
         self._move_to(now)
-        return TelemetryState(now, self._x, self._y, self._z, self._psi)
+        return TelemetryRecord(now, self._x, self._y, self._z, self._psi)
 
 
 @dataclass(frozen=True)

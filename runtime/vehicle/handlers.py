@@ -51,7 +51,8 @@ from dataclasses import dataclass, field
 from coral_lang import units
 from coral_lang.diagnostics import did_you_mean
 from coral_lang.profile import TIME_OUT, CommandSpec, VehicleProfile
-from runtime.vehicle.model import Params, Reply, TelemetrySnapshot
+from runtime.telemetry import TelemetryRecord
+from runtime.vehicle.model import Params, Reply
 
 __all__ = [
     "HandlerVehicle",
@@ -141,7 +142,7 @@ StopHandler = Callable[[Job], None]
 """Called when the vehicle ends a command its handler had not finished itself: a task
 replaced or stopped by the watchdog, a query timed out or orphaned, an action
 interrupted."""
-TelemetrySource = Callable[[float], TelemetrySnapshot | None]
+TelemetrySource = Callable[[float], TelemetryRecord | None]
 """Given the vehicle time, the state to send as telemetry (None: nothing to send)."""
 
 
@@ -366,7 +367,7 @@ class HandlerVehicle:
         self._outbox = []
         return out
 
-    def telemetry(self) -> TelemetrySnapshot | None:
+    def telemetry(self) -> TelemetryRecord | None:
         """The telemetry source's state at the vehicle time, or None.
 
         A source that raises gives None (noted once in `events`): no telemetry is better
@@ -375,12 +376,23 @@ class HandlerVehicle:
         if self._telemetry is None:
             return None
         try:
-            return self._telemetry(self._clock)
+            sample = self._telemetry(self._clock)
         except Exception as exc:
             if not self._telemetry_failed:
                 self._telemetry_failed = True
                 self._note(f"telemetry source raised {type(exc).__name__}: {exc}")
             return None
+        if sample is not None and not isinstance(sample, TelemetryRecord):
+            # A source written against another record (or returning a tuple) would fail
+            # deep in the server; it is named here once, and sends nothing.
+            if not self._telemetry_failed:
+                self._telemetry_failed = True
+                self._note(
+                    f"telemetry source returned {type(sample).__name__}, not a "
+                    "runtime.telemetry.TelemetryRecord: no telemetry is sent"
+                )
+            return None
+        return sample
 
     def command(self, command_id: int, name: str, params: Params) -> list[Reply]:
         """Start carrying out one command; return the replies due at once.

@@ -17,7 +17,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-__all__ = ["Params", "Reply", "TelemetrySnapshot", "TelemetryState", "VehicleModel"]
+from runtime.telemetry import TelemetryRecord
+
+__all__ = [
+    "Params",
+    "Reply",
+    "TelemetryRecord",
+    "VehicleModel",
+]
 
 Params = Mapping[str, float | int | str]
 """A command's parameters as they come off the wire."""
@@ -41,43 +48,6 @@ class Reply:
     kind: str
     time: float
     detail: str = ""
-
-
-@dataclass(frozen=True)
-class TelemetryState:
-    """What a telemetry datagram carries (``docs/protocol.md``): a snapshot of the vehicle.
-
-    Positions in m (x north, y east, z depth), heading ``psi`` in degrees clockwise from
-    north; ``x_est``/``y_est`` are the vehicle's own position estimate, None when it has
-    none.
-    """
-
-    time: float
-    x: float
-    y: float
-    z: float
-    psi: float
-    x_est: float | None = None
-    y_est: float | None = None
-
-
-class TelemetrySnapshot(Protocol):
-    """Any snapshot with the fields of `TelemetryState` (ROMEO's richer one included)."""
-
-    @property
-    def time(self) -> float: ...
-    @property
-    def x(self) -> float: ...
-    @property
-    def y(self) -> float: ...
-    @property
-    def z(self) -> float: ...
-    @property
-    def psi(self) -> float: ...
-    @property
-    def x_est(self) -> float | None: ...
-    @property
-    def y_est(self) -> float | None: ...
 
 
 @runtime_checkable
@@ -132,6 +102,9 @@ class VehicleModel(Protocol):
         """
         ...
 
-    def telemetry(self) -> TelemetrySnapshot | None:
-        """A snapshot to send as telemetry, or None when the vehicle has none to give."""
+    def telemetry(self) -> TelemetryRecord | None:
+        """A snapshot to send as telemetry, or None when the vehicle has none to give.
+
+        Its ``seq`` is left 0: the server numbers each sample it sends.
+        """
         ...

@@ -61,7 +61,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Generic
 
-from runtime.eventlog import EventLog, EventLogError, TelemetrySample
+from runtime.eventlog import EventLog, EventLogError
 from runtime.protocol import (
     MAX_DETAIL_BYTES,
     MAX_FRAME,
@@ -80,10 +80,10 @@ from runtime.protocol import (
     Role,
     StreamCodec,
     StreamMessage,
-    Telemetry,
     encode_datagram,
 )
-from runtime.vehicle.model import Reply, TelemetrySnapshot, VehicleModel
+from runtime.telemetry import TelemetryRecord
+from runtime.vehicle.model import Reply, VehicleModel
 from runtime.vehicle.sigterm import Terminated, sigterm_raises
 
 __all__ = ["ServerStats", "VehicleServer", "run_vehicle", "serve_vehicle"]
@@ -617,6 +617,12 @@ class VehicleServer(Generic[M]):
         while self._next_sample <= target:
             replies += self.vehicle.advance_to(max(self._next_sample, self.vehicle.time))
             snapshot = self.vehicle.telemetry()
+            if snapshot is not None and not isinstance(snapshot, TelemetryRecord):
+                raise TypeError(
+                    f"{type(self.vehicle).__name__}.telemetry() returned "
+                    f"{type(snapshot).__name__}; a vehicle model returns a "
+                    "runtime.telemetry.TelemetryRecord (or None)"
+                )
             if snapshot is not None:
                 self._record_sample(snapshot)
                 self._send_telemetry(snapshot)
@@ -636,13 +642,11 @@ class VehicleServer(Generic[M]):
             self._throttled.flush()
             await asyncio.sleep(self._tick)
 
-    def _record_sample(self, t: TelemetrySnapshot) -> None:
+    def _record_sample(self, t: TelemetryRecord) -> None:
         if self._events is None:
             return
         self._samples += 1
-        self._events.telemetry(
-            TelemetrySample(t.time, self._samples, t.x, t.y, t.z, t.psi, t.x_est, t.y_est)
-        )
+        self._events.telemetry(t.numbered(self._samples))
 
     def _record(self, what: str, /, **data: object) -> None:
         if self._events is not None:
@@ -654,7 +658,7 @@ class VehicleServer(Generic[M]):
             self._last_commit = now
             self._events.commit()
 
-    def _send_telemetry(self, t: TelemetrySnapshot) -> None:
+    def _send_telemetry(self, t: TelemetryRecord) -> None:
         conn = self._active
         if conn is None or conn.closed or conn.hello is None:
             return
@@ -666,9 +670,7 @@ class VehicleServer(Generic[M]):
             return
         conn.telemetry_seq += 1
         try:
-            datagram = encode_datagram(
-                key, Telemetry(conn.telemetry_seq, t.time, t.x, t.y, t.z, t.psi, t.x_est, t.y_est)
-            )
+            datagram = encode_datagram(key, t.numbered(conn.telemetry_seq))
         except ProtocolError as exc:  # a non-finite state: a bug in the model
             self._log(f"telemetry not sent: {exc}")
             return

@@ -28,7 +28,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Final
 
-from runtime.eventlog import Event, EventLog, TelemetrySample
+from runtime.eventlog import Event, EventLog
+from runtime.telemetry import TelemetryRecord
 from runtime.watch.state import Snapshot, WatchState, clock_rate
 
 __all__ = ["PUBLISH_INTERVAL", "LiveFeed"]
@@ -72,7 +73,7 @@ class LiveFeed:
 
     # --- the engine's side (keep it tiny) ---------------------------------------------------
 
-    def _on_row(self, row: Event | TelemetrySample) -> None:
+    def _on_row(self, row: Event | TelemetryRecord) -> None:
         with self._lock:
             if isinstance(row, Event):
                 if self.first_time is None:

@@ -60,7 +60,7 @@ from typing import Final, Protocol
 from aiohttp import web
 
 from coral_lang.diagnostics import CoralError
-from runtime.eventlog import Event, TelemetrySample
+from runtime.eventlog import Event, TelemetryRecord
 from runtime.operator import ACTIONS, Operate, OperatorAction
 from runtime.watch.page import PAGE
 from runtime.watch.source import LogReader
@@ -262,7 +262,7 @@ class Watch:
         self.poll_interval = poll_interval
         self.state = WatchState(reader.net_json, clock_rate(reader.meta))
         self.events: list[Event] = []
-        self.samples: list[TelemetrySample] = []
+        self.samples: list[TelemetryRecord] = []
 
     @property
     def ended(self) -> bool:
@@ -276,7 +276,7 @@ class Watch:
     def version(self) -> int:
         return len(self.events) + len(self.samples)
 
-    def ingest(self, events: list[Event], samples: list[TelemetrySample]) -> bool:
+    def ingest(self, events: list[Event], samples: list[TelemetryRecord]) -> bool:
         """Take newly read rows; whether there were any."""
         self.events.extend(events)
         self.samples.extend(samples)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from runtime.eventlog import Event, EventLog, EventLogError, TelemetrySample
+from runtime.eventlog import Event, EventLog, EventLogError, TelemetryRecord
 
 __all__ = ["LogReader"]
 
@@ -41,7 +41,7 @@ class LogReader:
         self.last_sample = 0
         self._log = log
 
-    def read(self) -> tuple[list[Event], list[TelemetrySample]]:
+    def read(self) -> tuple[list[Event], list[TelemetryRecord]]:
         """The events and samples committed since the last call (all of them at first)."""
         events = list(self._log.events(after=self.last_seq))
         numbered = list(self._log.numbered_samples(after=self.last_sample))

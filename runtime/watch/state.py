@@ -36,7 +36,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
-from runtime.eventlog import Event, TelemetrySample
+from runtime.eventlog import Event
+from runtime.telemetry import TelemetryRecord
 
 __all__ = [
     "FINISHED_COMMANDS_KEPT",
@@ -408,7 +409,7 @@ class WatchState:
         self.offset = 0.0
 
     def advance(
-        self, events: Iterable[Event] = (), samples: Iterable[TelemetrySample] = ()
+        self, events: Iterable[Event] = (), samples: Iterable[TelemetryRecord] = ()
     ) -> None:
         """Take the rows logged since the last call (each in log order)."""
         for event in events:
@@ -416,12 +417,12 @@ class WatchState:
         for sample in samples:
             self._sample(sample)
 
-    def sample_time(self, sample: TelemetrySample) -> float:
+    def sample_time(self, sample: TelemetryRecord) -> float:
         """A sample's time on the controller's clock (see the class)."""
         if self._anchor is None:
-            return sample.time - self.offset
+            return sample.vehicle_time - self.offset
         controller, vehicle = self._anchor
-        return controller + (sample.time - vehicle) / self.rate
+        return controller + (sample.vehicle_time - vehicle) / self.rate
 
     def _event(self, event: Event) -> None:
         self.seq = max(self.seq, event.seq)
@@ -550,11 +551,11 @@ class WatchState:
         elif accepted and action in ("resume", "give"):
             self.paused = False
 
-    def _sample(self, sample: TelemetrySample) -> None:
+    def _sample(self, sample: TelemetryRecord) -> None:
         time = self.sample_time(sample)
         self._telemetry = {
             "time": time,
-            "vehicle_time": sample.time,
+            "vehicle_time": sample.vehicle_time,
             "x": _finite(sample.x),
             "y": _finite(sample.y),
             "depth": _finite(sample.z),
@@ -646,7 +647,7 @@ def clock_rate(meta: Mapping[str, object]) -> float:
 def snapshot_at(
     net_json: str | None,
     events: Sequence[Event],
-    samples: Sequence[TelemetrySample],
+    samples: Sequence[TelemetryRecord],
     t: float,
     rate: float = 1.0,
 ) -> Snapshot:

@@ -23,7 +23,7 @@ def _trace(vehicle: Vehicle, seconds: float) -> list[tuple[float, float, float]]
         vehicle.heard_from_controller()
         vehicle.advance(0.05)
         t = vehicle.telemetry()
-        samples.append((t.time, t.z, t.psi))
+        samples.append((t.vehicle_time, t.z, t.psi))
     return samples
 
 

@@ -53,6 +53,7 @@ def test_romeo_sim_imports_only_the_allowed_parts_of_coral() -> None:
                     assert name.startswith("runtime.vehicle.") or name in (
                         "coral_lang.profile",
                         "runtime.protocol",
+                        "runtime.telemetry",
                         "runtime.keys",
                         "runtime.eventlog",
                     ), (source, name)

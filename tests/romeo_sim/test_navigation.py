@@ -25,9 +25,9 @@ def _fix_at(depth: float, seed: int) -> tuple[str, float]:
     (reply,) = [r for r in replies if r.command_id == 3]
     assert 10.0 - 1e-9 <= reply.time - 20.0 <= 10.05  # one sonar revolution
     t = vehicle.telemetry()
-    if t.x_est is None or t.y_est is None:
+    if t.est_x is None or t.est_y is None:
         return reply.kind, math.inf
-    return reply.kind, math.hypot(t.x - t.x_est, t.y - t.y_est)
+    return reply.kind, math.hypot(t.x - t.est_x, t.y - t.est_y)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -58,8 +58,8 @@ def test_estimate_keeps_tracking_while_moving() -> None:
     for _ in range(40):
         run(vehicle, 1.0)
         t = vehicle.telemetry()
-        assert t.x_est is not None and t.y_est is not None
-        worst = max(worst, math.hypot(t.x - t.x_est, t.y - t.y_est))
+        assert t.est_x is not None and t.est_y is not None
+        worst = max(worst, math.hypot(t.x - t.est_x, t.y - t.est_y))
     assert worst < 0.3
     assert vehicle.nav.ekf.accepted > 100
 

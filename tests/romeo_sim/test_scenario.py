@@ -37,9 +37,9 @@ def test_pool_mission_ends_docked_at_the_surface(mission: MissionResult) -> None
 
 def test_estimate_tracks_truth_through_the_mission(mission: MissionResult) -> None:
     errors = [
-        math.hypot(t.x - t.x_est, t.y - t.y_est)
+        math.hypot(t.x - t.est_x, t.y - t.est_y)
         for t in mission.recorder.telemetry
-        if t.x_est is not None and t.y_est is not None
+        if t.est_x is not None and t.est_y is not None
     ]
     assert len(errors) > 100
     assert max(errors) < 0.3
@@ -50,7 +50,7 @@ def test_run_log_exports(mission: MissionResult, tmp_path: Path) -> None:
     data = json.loads(path.read_text())
     assert len(data["telemetry"]) == len(mission.recorder.telemetry)
     assert data["commands"][0] == {"time": 0.0, "command_id": 1, "command": "INIT", "params": {}}
-    assert {"x", "x_est", "z", "psi"} <= set(data["telemetry"][0])
+    assert {"x", "est_x", "z", "psi"} <= set(data["telemetry"][0])
     files = mission.recorder.write_csv(tmp_path / "csv")
     assert sorted(p.name for p in files) == [
         "commands.csv",
@@ -63,6 +63,7 @@ def test_run_log_exports(mission: MissionResult, tmp_path: Path) -> None:
     assert rows[0]["command"] == "INIT" and rows[0]["kind"] == "done"
 
 
+@pytest.mark.slow
 def test_plots_are_written(mission: MissionResult, tmp_path: Path) -> None:
     pool = mission.vehicle.config.pool
     files = plot_run(

@@ -35,7 +35,7 @@ from runtime.protocol import (
     Role,
     StreamCodec,
     StreamMessage,
-    Telemetry,
+    TelemetryRecord,
 )
 
 PSK = bytes(range(32))
@@ -187,7 +187,7 @@ class _Datagrams(asyncio.DatagramProtocol):
 def test_telemetry_goes_to_the_announced_port_under_the_session_key() -> None:
     log: list[str] = []
 
-    async def scenario() -> list[Telemetry]:
+    async def scenario() -> list[TelemetryRecord]:
         loop = asyncio.get_running_loop()
         transport, inbox = await loop.create_datagram_endpoint(
             _Datagrams, local_addr=("127.0.0.1", 0)
@@ -202,7 +202,7 @@ def test_telemetry_goes_to_the_announced_port_under_the_session_key() -> None:
                 assert ctl.codec.session_key is not None
                 receiver = DatagramReceiver(ctl.codec.session_key)
                 await ctl.command(1, "DEPTH", z=1.0)
-                samples: list[Telemetry] = []
+                samples: list[TelemetryRecord] = []
                 while not samples or samples[-1].z < 0.5:
                     result = receiver.accept(await within(inbox.queue.get()))
                     assert not isinstance(result, Rejected), result

@@ -243,7 +243,7 @@ def test_clock_between_steps() -> None:
     vehicle.advance(0.07)
     assert vehicle.time == pytest.approx(10.07)
     assert vehicle.state_time == pytest.approx(10.05)
-    assert vehicle.telemetry().time == pytest.approx(10.05)
+    assert vehicle.telemetry().vehicle_time == pytest.approx(10.05)
 
 
 def test_status_lines_say_what_runs() -> None:

@@ -23,7 +23,7 @@ from runtime.eventlog import (
     Event,
     EventLog,
     EventLogError,
-    TelemetrySample,
+    TelemetryRecord,
 )
 from tests.conftest import REPO
 
@@ -36,8 +36,8 @@ def new_log(tmp_path: Path, name: str = "ctl.log", **kwargs: object) -> EventLog
     return EventLog.create(tmp_path / name, **args)  # type: ignore[arg-type]
 
 
-def sample(time: float, seq: int = 1, est: float | None = None) -> TelemetrySample:
-    return TelemetrySample(time, seq, 1.0 + time, 2.0, 3.0, 90.0, est, est)
+def sample(time: float, seq: int = 1, est: float | None = None) -> TelemetryRecord:
+    return TelemetryRecord(time, 1.0 + time, 2.0, 3.0, 90.0, est, est, seq=seq)
 
 
 # --- round trips ---------------------------------------------------------------------------
@@ -169,7 +169,7 @@ def test_non_finite_floats_sets_tuples_and_numpy_become_plain_json(tmp_path: Pat
 
 def test_telemetry_nan_pose_reads_back_as_nan_and_nan_estimate_as_none(tmp_path: Path) -> None:
     with new_log(tmp_path) as log:
-        log.telemetry(TelemetrySample(1.0, 1, math.nan, 2.0, 3.0, 4.0, math.nan, None))
+        log.telemetry(TelemetryRecord(1.0, math.nan, 2.0, 3.0, 4.0, math.nan, None, seq=1))
     with EventLog.open(tmp_path / "ctl.log") as log:
         (got,) = log.samples()
     assert math.isnan(got.x) and (got.y, got.est_x, got.est_y) == (2.0, None, None)
@@ -262,7 +262,7 @@ def test_commit_may_run_in_another_thread(tmp_path: Path) -> None:
 
 CHILD = """
 import random, sys
-from runtime.eventlog import EventLog, TelemetrySample
+from runtime.eventlog import EventLog, TelemetryRecord
 path, seed = sys.argv[1], int(sys.argv[2])
 rng = random.Random(seed)
 log = EventLog.open(path, writable=True)
@@ -275,7 +275,7 @@ while True:
         log.event(float(count), "tick", n=count)
     for _ in range(rng.randint(0, 3)):
         samples += 1
-        log.telemetry(TelemetrySample(float(samples), samples, 1.0, 2.0, 3.0, 4.0))
+        log.telemetry(TelemetryRecord(float(samples), 1.0, 2.0, 3.0, 4.0, seq=samples))
     commits += 1
     log.commit({"count": count, "samples": samples, "commits": commits})
 """
@@ -596,7 +596,7 @@ def test_an_edited_event_row_is_refused_by_name_in_readers_and_the_timeline(
 def test_an_edited_telemetry_row_is_refused_by_name(tmp_path: Path) -> None:
     path = tmp_path / "controller.sqlite"
     with EventLog.create(path, role="controller", mission="m", meta={}) as log:
-        log.telemetry(TelemetrySample(1.0, 1, 0.0, 0.0, 1.0, 90.0))
+        log.telemetry(TelemetryRecord(1.0, 0.0, 0.0, 1.0, 90.0, seq=1))
         log.commit()
     with sqlite3.connect(path) as db:
         db.execute("UPDATE telemetry SET x = 'north' WHERE n = 1")

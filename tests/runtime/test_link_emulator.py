@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from runtime.emulator import DatagramFate, Direction, LinkEmulator
+from runtime.emulator import DatagramFate, Direction, LinkEmulator, Outage
 from runtime.linkprofile import BUILTIN_PROFILES, LinkProfile
 
 GENOA = BUILTIN_PROFILES["genoa-lisbon"]
@@ -104,6 +104,7 @@ def _datagram_run(profile: LinkProfile, seed: int, count: int) -> list[DatagramF
     return [emulator.datagram(Direction.DOWN, 55, 0.2 * i) for i in range(count)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("profile", "seed"), [(STEADY, 3), (HOSTILE, 4)])
 def test_datagram_loss_duplication_and_reordering_follow_the_profile(
     profile: LinkProfile, seed: int
@@ -128,7 +129,7 @@ def test_outages_lose_datagrams_refuse_connections_and_cut_the_connection() -> N
     emulator = LinkEmulator(HOSTILE, 5)
     outage = emulator.next_outage(0.0)
     assert outage is not None
-    assert HOSTILE.outage_min_s <= outage.end - outage.start <= HOSTILE.outage_max_s
+    assert HOSTILE.outage_min_s <= outage.length <= HOSTILE.outage_max_s
     middle = (outage.start + outage.end) / 2
     assert emulator.outage_at(middle) == outage
     fate = emulator.datagram(Direction.DOWN, 55, middle)
@@ -142,13 +143,30 @@ def test_outages_lose_datagrams_refuse_connections_and_cut_the_connection() -> N
         assert before.path.ends_at <= outage.start
 
 
+def test_one_outage_serves_the_emulator_in_seconds_and_schedules_in_milliseconds() -> None:
+    """runtime.schedule lists outages with the emulator's class, in integer milliseconds."""
+    from runtime import schedule
+
+    assert schedule.Outage is Outage
+    in_ms = Outage(100, 29_900)
+    assert in_ms.end == 30_000 and isinstance(in_ms.end, int)
+    assert in_ms.covers(100) and in_ms.covers(29_999) and not in_ms.covers(30_000)
+    in_s = Outage(1.5, 2.0)
+    assert in_s.end == 3.5 and in_s.overlaps(0.0, 1.5) and not in_s.overlaps(3.5, 9.0)
+    with pytest.raises(ValueError, match="start and length >= 0"):
+        Outage(1.0, -0.5)
+    run = schedule.Schedule(outages=(in_ms,))
+    assert run.arrival(5_000) == 30_000 and run.arrival(30_000) == 30_000
+    assert "outage from 100 ms for 29900 ms" in run.describe()
+
+
 def test_outage_durations_and_rate_follow_the_profile() -> None:
     emulator = LinkEmulator(HOSTILE, 6)
     starts, lengths = [], []
     t = 0.0
     while (outage := emulator.next_outage(t)) is not None and outage.start < 50_000:
         starts.append(outage.start)
-        lengths.append(outage.end - outage.start)
+        lengths.append(outage.length)
         t = outage.end
     assert all(HOSTILE.outage_min_s <= length <= HOSTILE.outage_max_s for length in lengths)
     up_time = 50_000 - sum(lengths)

@@ -46,7 +46,7 @@ from runtime.protocol import (
     Role,
     StreamCodec,
     StreamMessage,
-    Telemetry,
+    TelemetryRecord,
 )
 from runtime.socketlink import local_address_towards
 from runtime.vclock import run_virtual
@@ -138,10 +138,10 @@ def _server(loop: asyncio.AbstractEventLoop, log: list[str], seed: int = 0) -> V
     )
 
 
-def _telemetry(key: bytes | None, datagrams: list[bytes]) -> list[Telemetry]:
+def _telemetry(key: bytes | None, datagrams: list[bytes]) -> list[TelemetryRecord]:
     assert key is not None
     receiver = DatagramReceiver(key)
-    return [t for t in map(receiver.accept, datagrams) if isinstance(t, Telemetry)]
+    return [t for t in map(receiver.accept, datagrams) if isinstance(t, TelemetryRecord)]
 
 
 # ---------------------------------------------------------------------- in memory
@@ -155,7 +155,7 @@ class MissionRun:
     delay: float
     replies: list[Reply]
     datagrams: int
-    samples: list[Telemetry]
+    samples: list[TelemetryRecord]
     stats: LinkStats
     server: str
     server_log: list[str]
@@ -212,7 +212,7 @@ def test_a_mission_start_over_the_papers_link_in_virtual_time() -> None:
     line = (66 + 88 + 4 * 40) * 10 / 9600
     assert run.handshake_done > line + 4 * GENOA.delay_s
     assert run.delay > GENOA.delay_s
-    # Telemetry at 2 Hz for about 20 s, through 1 % loss: nearly all of it arrives.
+    # TelemetryRecord at 2 Hz for about 20 s, through 1 % loss: nearly all of it arrives.
     assert len(run.samples) >= 30
     assert run.samples[-1].z > run.samples[0].z + 0.3  # the vehicle dives
     stats = run.stats
@@ -359,7 +359,7 @@ async def _socket_mission(
     vehicle_host: str = "127.0.0.1",
     telemetry_host: str | None = None,
     peers: list[str] | None = None,
-) -> tuple[list[Reply], list[Telemetry], LinkStats]:
+) -> tuple[list[Reply], list[TelemetryRecord], LinkStats]:
     """INIT and DEPTH over a SocketLink to a real server, then telemetry; ``peers``
     receives the address the vehicle saw its controller at."""
     loop = asyncio.get_running_loop()
@@ -410,6 +410,7 @@ def test_the_socket_link_talks_to_a_real_server(profile: LinkProfile | None) -> 
         assert stats.datagrams_lost == 0 and stats.datagrams_delivered == stats.datagrams
 
 
+@pytest.mark.slow
 def test_the_socket_link_resets_under_the_emulator_and_reconnects() -> None:
     # Seed 12: the connections live 0.65 s and 0.54 s, ample for a handshake on localhost.
     profile = replace(FAST, reset_rate_per_s=2.0)

@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from runtime.cli import main as run_main
-from runtime.eventlog import EventLog, EventLogError, TelemetrySample, log_key
+from runtime.eventlog import EventLog, EventLogError, TelemetryRecord, log_key
 from runtime.eventlog.auth import encode, key_id
 from runtime.run import RunConfig, open_for_resume
 from runtime.timeline import merge_logs
@@ -47,7 +47,7 @@ def write_log(path: Path, key: bytes | None = KEY, commits: int = 4) -> None:
         for n in range(1, commits + 1):
             for i in range(3):
                 log.event(10.0 * n + i, "fire", transition=f"t{n}.{i}", marking={"a": n})
-            log.telemetry(TelemetrySample(float(n), n, 1.0, -0.0, 3.0, 4.0))
+            log.telemetry(TelemetryRecord(float(n), 1.0, -0.0, 3.0, 4.0, seq=n))
             log.commit({"step": n, "marking": {"a": n}})
         log.event(99.0, "mission-end", end="final")  # committed by close, without a state
 
@@ -85,7 +85,7 @@ def test_an_honest_log_verifies_and_a_resumed_writer_extends_its_chain(tmp_path:
         assert log.checkpoint() == {"step": 4, "marking": {"a": 4}}
     with EventLog.open(path, writable=True, mac_key=KEY) as log:
         log.event(100.0, "resume")
-        log.telemetry(TelemetrySample(9.0, 1, 1.0, 2.0, 3.0, 4.0))
+        log.telemetry(TelemetryRecord(9.0, 1.0, 2.0, 3.0, 4.0, seq=1))
         log.commit({"step": 5})
     with EventLog.open(path) as log:
         log.verify(KEY)
@@ -356,7 +356,7 @@ def test_a_whole_tail_cut_back_to_an_earlier_commit_still_verifies(tmp_path: Pat
     db.close()
     with EventLog.open(path, writable=True, mac_key=KEY) as log:  # the run goes on
         log.event(200.0, "fire")
-        log.telemetry(TelemetrySample(9.0, 9, 1.0, 2.0, 3.0, 4.0))
+        log.telemetry(TelemetryRecord(9.0, 1.0, 2.0, 3.0, 4.0, seq=9))
         log.commit({"step": 3})
     db = sqlite3.connect(path)
     with db:
@@ -498,6 +498,7 @@ def _copy(log: Path, tmp_path: Path) -> Path:
     return Path(shutil.copy(log, tmp_path / "run" / "controller.sqlite"))
 
 
+@pytest.mark.slow
 def test_resume_refuses_an_earlier_checkpoint_put_back(
     runs: tuple[Path, Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

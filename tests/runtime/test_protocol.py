@@ -35,7 +35,7 @@ from runtime.protocol import (
     Role,
     StreamCodec,
     StreamMessage,
-    Telemetry,
+    TelemetryRecord,
     clock_offset,
     encode_datagram,
     frame_size,
@@ -425,7 +425,7 @@ def test_documented_frame_sizes(label: str, msg: StreamMessage, size: int) -> No
 def test_documented_constants() -> None:
     assert (HEADER_SIZE, TAG_SIZE, MAX_FRAME, MAX_PAYLOAD) == (11, 16, 1024, 997)
     assert TELEMETRY_SIZE == 55
-    assert len(encode_datagram(PSK, Telemetry(1, 0.0, 0.0, 0.0, 0.0, 0.0))) == 55
+    assert len(encode_datagram(PSK, TelemetryRecord(0.0, 0.0, 0.0, 0.0, 0.0, seq=1))) == 55
 
 
 # --- telemetry datagrams -----------------------------------------------------------------
@@ -448,17 +448,20 @@ small = st.floats(-1e6, 1e6, allow_nan=False)
 def test_telemetry_round_trip_in_float32(
     seq: int, t: float, pose: tuple[float, float, float, float], est: float | None
 ) -> None:
-    sent = Telemetry(seq, t, *pose, est, est)
+    sent = TelemetryRecord(t, *pose, est, est, seq=seq)
     got = DatagramReceiver(PSK).accept(encode_datagram(PSK, sent))
     rounded = None if est is None else f32(est)
     x, y, z, psi = (f32(v) for v in pose)
-    assert got == Telemetry(seq, t, x, y, z, psi, rounded, rounded)
+    assert got == TelemetryRecord(t, x, y, z, psi, rounded, rounded, seq=seq)
 
 
 def test_late_and_duplicate_telemetry_dropped() -> None:
     rx = DatagramReceiver(PSK)
-    got = [rx.accept(encode_datagram(PSK, Telemetry(s, s, 0, 0, 1, 0))) for s in (1, 3, 2, 3, 4)]
-    assert [g.seq if isinstance(g, Telemetry) else g.reason for g in got] == [
+    got = [
+        rx.accept(encode_datagram(PSK, TelemetryRecord(s, 0, 0, 1, 0, seq=s)))
+        for s in (1, 3, 2, 3, 4)
+    ]
+    assert [g.seq if isinstance(g, TelemetryRecord) else g.reason for g in got] == [
         1,
         3,
         RejectReason.LATE,
@@ -474,7 +477,7 @@ def test_random_datagrams_never_raise(data: bytes) -> None:
 
 
 def test_flipped_or_foreign_datagrams_rejected() -> None:
-    good = encode_datagram(PSK, Telemetry(1, 5.0, 1.0, 2.0, 3.0, 45.0, 1.1, 2.1))
+    good = encode_datagram(PSK, TelemetryRecord(5.0, 1.0, 2.0, 3.0, 45.0, 1.1, 2.1, seq=1))
     for bit in range(len(good) * 8):
         bad = bytearray(good)
         bad[bit // 8] ^= 1 << (bit % 8)
@@ -486,10 +489,10 @@ def test_flipped_or_foreign_datagrams_rejected() -> None:
 
 def test_datagram_misuse_raises() -> None:
     for bad in (
-        Telemetry(0, 0.0, 0, 0, 0, 0),
-        Telemetry(1, math.nan, 0, 0, 0, 0),
-        Telemetry(1, 0.0, 1e39, 0, 0, 0),
-        Telemetry(1, 0.0, 0, 0, 0, 0, math.inf),
+        TelemetryRecord(0.0, 0, 0, 0, 0),
+        TelemetryRecord(math.nan, 0, 0, 0, 0, seq=1),
+        TelemetryRecord(0.0, 1e39, 0, 0, 0, seq=1),
+        TelemetryRecord(0.0, 0, 0, 0, 0, math.inf, seq=1),
     ):
         with pytest.raises(ProtocolError):
             encode_datagram(PSK, bad)
@@ -563,20 +566,41 @@ def test_clock_sync_from_handshake() -> None:
 
 
 def test_protocol_imports_nothing_else_of_ours() -> None:
+    """Every module of the package imports only itself, the shared telemetry record and
+    ``coral_lang.diagnostics``: the vehicle side builds on it without the engine."""
     import ast
     from pathlib import Path
 
     import runtime.protocol
 
-    tree = ast.parse(Path(runtime.protocol.__file__).read_text(encoding="utf-8"))
+    folder = Path(runtime.protocol.__file__).parent
+    modules = sorted(folder.glob("*.py"))
+    assert {m.stem for m in modules} >= {"__init__", "codec", "datagrams", "ledger", "clock"}
     ours = {"runtime", "analysis", "romeo_sim", "coral_lang"}
     imported = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            imported |= {a.name for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.module:
-            imported.add(node.module)
-    assert {m for m in imported if m.split(".")[0] in ours} == {"coral_lang.diagnostics"}
+    for module in modules:
+        for node in ast.walk(ast.parse(module.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                imported |= {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                imported.add(node.module)
+    outside = {
+        m for m in imported if m.split(".")[0] in ours and not m.startswith("runtime.protocol")
+    }
+    assert outside == {"coral_lang.diagnostics", "runtime.telemetry"}
+
+
+def test_every_part_is_re_exported_by_the_package() -> None:
+    """``from runtime.protocol import X`` reaches every public name of every part."""
+    import importlib
+
+    import runtime.protocol as protocol
+
+    for part in ("wire", "messages", "auth", "payload", "codec", "datagrams", "ledger", "clock"):
+        module = importlib.import_module(f"runtime.protocol.{part}")
+        for name in module.__all__:
+            if name in protocol.__all__:
+                assert getattr(protocol, name) is getattr(module, name), name
 
 
 # --- delivery across connection resets ---------------------------------------------------
@@ -684,6 +708,7 @@ class _Controller:
         return out
 
 
+@pytest.mark.slow
 @settings(max_examples=300)
 @given(st.data())
 def test_no_command_lost_none_done_twice_every_reply_consumed_once(data: st.DataObject) -> None:
@@ -830,7 +855,7 @@ def test_public_surface() -> None:
             "StreamMessage",
             "TAG_SIZE",
             "TELEMETRY_SIZE",
-            "Telemetry",
+            "TelemetryRecord",
             "clock_offset",
             "encode_datagram",
             "frame_size",

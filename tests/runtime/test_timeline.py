@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from runtime.cli import main as coral_run
-from runtime.eventlog import Event, EventLog, EventLogError, TelemetrySample
+from runtime.eventlog import Event, EventLog, EventLogError, TelemetryRecord
 from runtime.timeline import (
     DPI,
     EVENTS_FIGSIZE,
@@ -86,7 +86,7 @@ def make_logs(
         ctl.event(111.0, "mission-end", final="ok", marking={"at_depth": 1})
         if controller_samples:
             for i in range(4):
-                ctl.telemetry(TelemetrySample(112.5 + i, i + 1, 1.0, 2.0, 0.5 * i, 90.0))
+                ctl.telemetry(TelemetryRecord(112.5 + i, 1.0, 2.0, 0.5 * i, 90.0, seq=i + 1))
         ctl.commit({"consumed": 2})
     with EventLog.create(veh_path, role="vehicle", mission=vehicle_mission, meta={}) as veh:
         veh.event(113.9, "command-received", command_id=1, name="DEPTH")
@@ -98,7 +98,7 @@ def make_logs(
             t = 112.5 + 0.5 * i
             est = 1.1 if i > 16 else None
             veh.telemetry(
-                TelemetrySample(t, i + 1, 1.0 + 0.1 * i, 2.0, min(2.0, 0.2 * i), 90.0, est, est)
+                TelemetryRecord(t, 1.0 + 0.1 * i, 2.0, min(2.0, 0.2 * i), 90.0, est, est, seq=i + 1)
             )
         veh.commit()
     return ctl_path, veh_path
@@ -129,9 +129,10 @@ def test_vehicle_times_are_mapped_onto_the_controller_clock_and_merged_in_order(
         (110.0, "controller", "fire"),
         (111.0, "controller", "mission-end"),
     ]
-    # Events keep their own clock; only the merged time is converted.
+    # Events and samples keep their own clock; only the merged time is converted.
     assert timeline.events[2][2].time == 113.9
-    assert timeline.samples[0].time == 100.0 and timeline.samples[-1].time == pytest.approx(111.5)
+    assert timeline.samples[0][0] == 100.0 and timeline.samples[-1][0] == pytest.approx(111.5)
+    assert [s.vehicle_time for _, s in timeline.samples[:2]] == [112.5, 113.0]
     assert timeline.sample_source == "vehicle" and len(timeline.samples) == 18
     assert (timeline.start, timeline.end) == (101.0, 111.5)
     assert merge_logs([ctl, veh]) == timeline
@@ -147,11 +148,11 @@ def test_each_vehicle_time_uses_the_last_handshake_before_it(tmp_path: Path) -> 
         veh.event(50.0, "note")  # before any handshake: the first one applies
         veh.event(215.0, "note")
         veh.event(230.0, "note")
-        veh.telemetry(TelemetrySample(230.0, 1, 0.0, 0.0, 0.0, 0.0))
+        veh.telemetry(TelemetryRecord(230.0, 0.0, 0.0, 0.0, 0.0, seq=1))
     timeline = merge_logs([ctl_path, veh_path])
     vehicle = [t for t, source, _ in timeline.events if source == "vehicle"]
     assert vehicle == [37.5, 202.5, 210.0]
-    assert timeline.samples[0].time == 210.0
+    assert timeline.samples[0][0] == 210.0
     assert timeline.offset == 12.5 and timeline.offsets == [(100.0, 12.5), (200.5, 20.0)]
     assert "2 handshakes, 12.500 .. 20.000 s" in summarize(timeline)
 
@@ -168,7 +169,7 @@ def test_a_controller_log_alone_gives_the_telemetry_it_received(tmp_path: Path) 
     ctl, _ = make_logs(tmp_path, controller_samples=True)
     timeline = merge_logs([ctl])
     assert timeline.sample_source == "controller" and timeline.received_samples == 4
-    assert [s.time for s in timeline.samples] == [100.0, 101.0, 102.0, 103.0]
+    assert [t for t, _ in timeline.samples] == [100.0, 101.0, 102.0, 103.0]
     assert set(timeline.logs) == {"controller"}
 
 
@@ -224,13 +225,10 @@ def test_summary_names_the_logs_offset_counts_delays_and_gaps(tmp_path: Path) ->
 
 
 def test_gaps_are_long_against_the_usual_rate() -> None:
-    def at(*times: float) -> list[TelemetrySample]:
-        return [TelemetrySample(t, i, 0.0, 0.0, 0.0, 0.0) for i, t in enumerate(times)]
-
-    assert telemetry_gaps(at()) == [] and telemetry_gaps(at(1.0)) == []
-    assert telemetry_gaps(at(0.0, 0.5, 1.0, 1.5, 4.0, 4.5)) == [(1.5, 2.5)]
-    assert telemetry_gaps(at(0.0, 2.0, 4.0, 6.0)) == []  # slow but steady
-    assert telemetry_gaps(at(0.0, 0.1, 0.2, 0.3, 0.9)) == []  # under the 1 s floor
+    assert telemetry_gaps([]) == [] and telemetry_gaps([1.0]) == []
+    assert telemetry_gaps([0.0, 0.5, 1.0, 1.5, 4.0, 4.5]) == [(1.5, 2.5)]
+    assert telemetry_gaps([0.0, 2.0, 4.0, 6.0]) == []  # slow but steady
+    assert telemetry_gaps([0.0, 0.1, 0.2, 0.3, 0.9]) == []  # under the 1 s floor
 
 
 def test_plots_are_written_at_their_documented_size(tmp_path: Path) -> None:
@@ -312,7 +310,7 @@ def _rate_logs(
     veh_meta: dict[str, object] = {} if speed is None else {"speed": speed}
     with EventLog.create(veh_path, role="vehicle", mission="m", meta=veh_meta) as veh:
         veh.event(100.0, "note")
-        veh.telemetry(TelemetrySample(110.0, 1, 0.0, 0.0, 0.0, 0.0))
+        veh.telemetry(TelemetryRecord(110.0, 0.0, 0.0, 0.0, 0.0, seq=1))
     return [ctl_path, veh_path]
 
 
@@ -321,7 +319,7 @@ def test_a_faster_vehicle_clock_is_scaled_back_onto_the_controllers(tmp_path: Pa
     assert timeline.rate == 5.0 and timeline.rate_source == "vehicle log's meta 'speed'"
     # 50 s of vehicle time after the handshake is 10 s of the controller's.
     assert [t for t, s, _ in timeline.events if s == "vehicle"] == [20.0]
-    assert timeline.samples[0].time == 22.0
+    assert timeline.samples[0][0] == 22.0
     assert timeline.to_controller(50.0) == 10.0
     assert "vehicle clock runs 5 x the controller's" in summarize(timeline)
 
@@ -371,6 +369,7 @@ def test_each_handshake_maps_onto_itself_and_vehicle_seconds_scale_by_the_rate(
         assert later == pytest.approx(time + elapsed, abs=1e-6)
 
 
+@pytest.mark.slow
 def test_a_real_time_run_at_speed_50_ends_on_the_controllers_axis(tmp_path: Path) -> None:
     """The reported bug: with --realtime --speed S the vehicle's events ran S times too far."""
     out = tmp_path / "run"
@@ -382,7 +381,7 @@ def test_a_real_time_run_at_speed_50_ends_on_the_controllers_axis(tmp_path: Path
     end = next(t for t, _, e in timeline.events if e.kind == "mission-end")
     vehicle = [t for t, s, _ in timeline.events if s == "vehicle"]
     assert end - 0.5 < vehicle[-1] < end + 0.1  # unscaled: about 50 x the mission's length
-    assert timeline.samples[-1].time < end + 0.5
+    assert timeline.samples[-1][0] < end + 0.5
     for command in commands_of(timeline):  # a reply is issued before it is consumed
         issued = min(t for t, _ in command.issued)
         assert issued < command.replies[0][0] + 0.1
@@ -436,11 +435,12 @@ def _unfinished_log(path: Path, log: EventLog | None = None) -> EventLog:
     log.event(0.1, "fire", transition="go", command_id=1)
     log.event(0.1, "command-sent", command_id=1, transition="go", name="GOTO", params={"x": 1.0})
     log.event(0.4, "handshake", offset=2.0)
-    log.telemetry(TelemetrySample(3.0, 1, 0.0, 0.0, 0.0, 0.0))
+    log.telemetry(TelemetryRecord(3.0, 0.0, 0.0, 0.0, 0.0, seq=1))
     log.commit({"mission_id": 7, "consumed": 0})
     return log
 
 
+@pytest.mark.slow
 def test_a_mission_without_an_end_merges_summarises_and_plots(tmp_path: Path) -> None:
     _unfinished_log(tmp_path / "ctl.log").close()
     timeline = merge_logs([tmp_path / "ctl.log"])
@@ -472,13 +472,14 @@ def test_a_log_still_open_for_writing_can_be_merged(tmp_path: Path) -> None:
 
 def _timeline_of(
     events: list[tuple[float, str, dict[str, object]]],
-    samples: list[TelemetrySample] | None = None,
+    samples: list[TelemetryRecord] | None = None,
 ) -> MergedTimeline:
     """A controller-only timeline built directly: plot tests need no file."""
     logged = [
         (t, "controller", Event(i + 1, t, kind, data)) for i, (t, kind, data) in enumerate(events)
     ]
-    return MergedTimeline(logged, samples or [], None, "m", logs={"controller": Path("ctl.log")})
+    timed = [(s.vehicle_time, s) for s in samples or []]
+    return MergedTimeline(logged, timed, None, "m", logs={"controller": Path("ctl.log")})
 
 
 def _drawn_label_boxes(fig: Any, ax: Any) -> list[Any]:
@@ -547,7 +548,7 @@ def test_a_continuous_heading_follows_each_turn_and_keeps_the_compass_value(
 def test_a_heading_crossing_north_is_drawn_without_a_jump() -> None:
     psi = [350.0 + 2.0 * i for i in range(10)]  # 350, 352, ..., 358, 0, 2, ..., 8
     samples = [
-        TelemetrySample(float(i), i + 1, 1.0, 1.0, 1.0, value % 360.0)
+        TelemetryRecord(float(i), 1.0, 1.0, 1.0, value % 360.0, seq=i + 1)
         for i, value in enumerate(psi)
     ]
     timeline = _timeline_of([], samples)
@@ -611,6 +612,7 @@ def test_waypoints_and_legs_come_from_the_commands_and_the_workspace_from_the_pr
     ]
 
 
+@pytest.mark.slow
 def test_the_pool_mission_plot_has_the_pool_its_way_points_and_its_phases(tmp_path: Path) -> None:
     out = tmp_path / "run"
     argv = [str(POOL_MISSION), "--verify", "--certificate", str(tmp_path / "c.json")]

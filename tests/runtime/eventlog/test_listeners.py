@@ -3,6 +3,7 @@ removable, and a listener that raises is dropped without breaking the log."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -10,29 +11,29 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from runtime.eventlog import Event, EventLog, TelemetrySample
+from runtime.eventlog import Event, EventLog, TelemetryRecord
 
 
 def _create(path: Path) -> EventLog:
     return EventLog.create(path, role="controller", mission="m", meta={})
 
 
-def _same_sample(a: TelemetrySample, b: TelemetrySample) -> bool:
+def _same_sample(a: TelemetryRecord, b: TelemetryRecord) -> bool:
     def same(x: float | None, y: float | None) -> bool:
         if x is None or y is None:
             return x is y
         return (math.isnan(x) and math.isnan(y)) or x == y
 
-    fields = ("time", "seq", "x", "y", "z", "psi", "est_x", "est_y")
+    fields = [f.name for f in dataclasses.fields(TelemetryRecord)]
     return all(same(getattr(a, f), getattr(b, f)) for f in fields)
 
 
 def test_the_listener_sees_each_row_as_it_is_stored(tmp_path: Path) -> None:
-    seen: list[Event | TelemetrySample] = []
+    seen: list[Event | TelemetryRecord] = []
     with _create(tmp_path / "log.sqlite") as log:
         log.add_listener(seen.append)
         log.event(0.5, "fire", transition="t", pair=(1, 2), bad=math.nan, big=math.inf)
-        log.telemetry(TelemetrySample(1.0, 7, 1.0, math.nan, 3.0, 4.0, math.nan, 2.5))
+        log.telemetry(TelemetryRecord(1.0, 1.0, math.nan, 3.0, 4.0, math.nan, 2.5, seq=7))
         log.commit({"s": 1})
         log.event(2.0, "reply", kind="done")
     assert seen[0] == Event(
@@ -43,7 +44,7 @@ def test_the_listener_sees_each_row_as_it_is_stored(tmp_path: Path) -> None:
         assert list(log.events()) == [seen[0], seen[2]]
         [stored] = list(log.samples())
     sample = seen[1]
-    assert isinstance(sample, TelemetrySample) and _same_sample(sample, stored)
+    assert isinstance(sample, TelemetryRecord) and _same_sample(sample, stored)
 
 
 def test_a_removed_listener_is_not_called(tmp_path: Path) -> None:
@@ -93,7 +94,7 @@ def test_seq_given_to_listeners_is_the_stored_one(
             if op == "event":
                 log.event(float(n), "e", n=n)
             elif op == "sample":
-                log.telemetry(TelemetrySample(float(n), n, 0.0, 0.0, 0.0, 0.0))
+                log.telemetry(TelemetryRecord(float(n), 0.0, 0.0, 0.0, 0.0, seq=n))
             else:
                 log.commit()
     with EventLog.open(path) as log:
@@ -104,11 +105,11 @@ def test_replay_gives_the_rows_already_logged_then_the_new_ones(tmp_path: Path) 
     path = tmp_path / "log.sqlite"
     with _create(path) as log:
         log.event(0.0, "a", n=1)
-        log.telemetry(TelemetrySample(0.5, 1, 1.0, 2.0, 3.0, 4.0))
+        log.telemetry(TelemetryRecord(0.5, 1.0, 2.0, 3.0, 4.0, seq=1))
         log.commit()
         log.event(1.0, "b")  # buffered, not committed yet
-        log.telemetry(TelemetrySample(1.5, 2, math.nan, 2.0, 3.0, 4.0))
-        seen: list[Event | TelemetrySample] = []
+        log.telemetry(TelemetryRecord(1.5, math.nan, 2.0, 3.0, 4.0, seq=2))
+        seen: list[Event | TelemetryRecord] = []
         log.add_listener(seen.append, replay=True)
         assert [getattr(row, "kind", None) for row in seen] == ["a", "b", None, None]
         log.event(2.0, "c")
@@ -117,7 +118,7 @@ def test_replay_gives_the_rows_already_logged_then_the_new_ones(tmp_path: Path) 
         events = list(log.events())
         samples = list(log.samples())
     assert [row for row in seen if isinstance(row, Event)] == events
-    replayed = [row for row in seen if isinstance(row, TelemetrySample)]
+    replayed = [row for row in seen if isinstance(row, TelemetryRecord)]
     assert len(replayed) == 2 and all(map(_same_sample, replayed, samples))
 
 

@@ -14,7 +14,7 @@ from coral_lang.profile import VehicleProfile, load_bundled_profile, parse_profi
 from romeo_sim.vehicle import Vehicle
 from runtime.faultplan import FaultPlan, parse_fault_rules
 from runtime.vehicle.faults import FaultInjector, InjectedFault
-from runtime.vehicle.model import Params, Reply, TelemetryState, VehicleModel
+from runtime.vehicle.model import Params, Reply, TelemetryRecord, VehicleModel
 
 ROMEO = load_bundled_profile("ROMEO")
 TOY = parse_profile(
@@ -70,8 +70,8 @@ class Fake:
     def make_safe(self, reason: str) -> list[Reply]:
         return []  # nothing runs long enough here for a stop to matter
 
-    def telemetry(self) -> TelemetryState:
-        return TelemetryState(self.clock, 1.0, 2.0, 3.0, 90.0)
+    def telemetry(self) -> TelemetryRecord:
+        return TelemetryRecord(self.clock, 1.0, 2.0, 3.0, 90.0)
 
     def _later(self, at: float, reply: Reply) -> None:
         self._due.append((at, self._seq, reply))
@@ -147,6 +147,7 @@ def _drive(model: VehicleModel, steps: list[Step]) -> list[tuple[str, list[Reply
     return out
 
 
+@pytest.mark.slow
 @settings(max_examples=150)
 @given(
     steps=st.lists(STEPS, max_size=40),
@@ -170,7 +171,7 @@ def test_the_injector_is_a_vehicle_model_delegating_clock_watchdog_and_telemetry
     injector.advance_to(3.0)
     assert injector.time == 3.0 == fake(injector).clock
     telemetry = injector.telemetry()
-    assert telemetry is not None and telemetry.time == 3.0 and telemetry.psi == 90.0
+    assert telemetry is not None and telemetry.vehicle_time == 3.0 and telemetry.psi == 90.0
     before = fake(injector).heard
     injector.heard_from_controller()
     assert fake(injector).heard == before + 1

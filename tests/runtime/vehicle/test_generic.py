@@ -10,7 +10,8 @@ import pytest
 from coral_lang.profile import VehicleProfile, load_bundled_profile, load_profile
 from romeo_sim.plugin import SIMULATOR as ROMEO
 from romeo_sim.vehicle import Vehicle
-from runtime.vehicle import Reply, TelemetryState, VehicleModel
+from runtime.telemetry import TelemetryRecord
+from runtime.vehicle import Reply, VehicleModel
 from runtime.vehicle.generic import SIMULATOR as GENERIC
 from runtime.vehicle.generic import GenericVehicle
 from runtime.vehicle.registry import (
@@ -108,13 +109,13 @@ def test_the_pose_follows_the_tasks_targets() -> None:
     vehicle.command(1, "DIVE", {"z": 3.0})
     vehicle.advance_to(5.0)
     pose = vehicle.telemetry()
-    assert pose == TelemetryState(5.0, 0.0, 0.0, 1.5, 0.0)  # 0.3 m/s down
+    assert pose == TelemetryRecord(5.0, 0.0, 0.0, 1.5, 0.0)  # 0.3 m/s down
     vehicle.command(2, "SURVEY_LINE", {"x0": 0.0, "y0": 0.0, "x1": 0.0, "y1": 30.0, "speed": 1.0})
     vehicle.advance_to(20.0)
     pose = vehicle.telemetry()
     assert pose is not None
     assert (pose.x, pose.y, pose.z, pose.psi) == pytest.approx((0.0, 15.0, 3.0, 90.0))
-    assert pose.x_est is None
+    assert pose.est_x is None
     vehicle.command(3, "SURFACE", {})
     vehicle.advance_to(40.0)
     pose = vehicle.telemetry()
@@ -126,6 +127,7 @@ def test_bad_variation_is_refused() -> None:
         GenericVehicle(minnow(), variation=1.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["minnow", "glider", "usv", "ROMEO"])
 def test_every_command_of_every_example_profile_gets_its_expected_reply(name: str) -> None:
     profile = (

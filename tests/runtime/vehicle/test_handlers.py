@@ -13,13 +13,13 @@ from collections.abc import Callable, Mapping
 import pytest
 
 from coral_lang.profile import VehicleProfile, parse_profile
+from runtime.telemetry import TelemetryRecord
 from runtime.vehicle import (
     HandlerVehicle,
     Job,
     Outcome,
     Refused,
     Reply,
-    TelemetryState,
     VehicleModel,
     check_params,
 )
@@ -501,16 +501,27 @@ def test_a_failing_make_safe_is_noted_not_raised() -> None:
 def test_telemetry_comes_from_the_source_at_the_vehicle_time() -> None:
     assert HandlerVehicle(profile()).telemetry() is None
     vehicle = HandlerVehicle(
-        profile(), telemetry=lambda now: TelemetryState(now, 1.0, 2.0, now / 10, 90.0)
+        profile(), telemetry=lambda now: TelemetryRecord(now, 1.0, 2.0, now / 10, 90.0)
     )
     vehicle.advance_to(5.0)
-    assert vehicle.telemetry() == TelemetryState(5.0, 1.0, 2.0, 0.5, 90.0)
+    assert vehicle.telemetry() == TelemetryRecord(5.0, 1.0, 2.0, 0.5, 90.0)
 
 
 def test_a_failing_telemetry_source_gives_none_and_one_note() -> None:
-    def source(now: float) -> TelemetryState:
+    def source(now: float) -> TelemetryRecord:
         raise ValueError("no fix")
 
     vehicle = HandlerVehicle(profile(), telemetry=source)
     assert vehicle.telemetry() is None and vehicle.telemetry() is None
     assert [e.text for e in vehicle.events] == ["telemetry source raised ValueError: no fix"]
+
+
+def test_a_source_returning_something_else_is_named_once_and_sends_nothing() -> None:
+    """A source written against an older record, or returning a tuple, is caught here
+    rather than failing inside the server."""
+    vehicle = HandlerVehicle(profile(), telemetry=lambda now: (now, 1.0, 2.0, 0.0, 90.0))  # type: ignore[arg-type,return-value]
+    assert vehicle.telemetry() is None and vehicle.telemetry() is None
+    assert [e.text for e in vehicle.events] == [
+        "telemetry source returned tuple, not a runtime.telemetry.TelemetryRecord: "
+        "no telemetry is sent"
+    ]

@@ -37,7 +37,7 @@ from runtime.protocol import (
     Role,
     StreamCodec,
     StreamMessage,
-    Telemetry,
+    TelemetryRecord,
 )
 from runtime.vclock import run_virtual
 from runtime.vehicle import (
@@ -113,7 +113,9 @@ def test_the_server_serves_a_generic_vehicle(tmp_path: Path) -> None:
     """Handshake, replies from a non-ROMEO model (at once, later, caused by another
     command), telemetry datagrams and the vehicle's event log."""
 
-    async def scenario() -> tuple[list[Reply], list[Telemetry], HelloReply | None, ServerStats]:
+    async def scenario() -> tuple[
+        list[Reply], list[TelemetryRecord], HelloReply | None, ServerStats
+    ]:
         loop = asyncio.get_running_loop()
         log = EventLog.create(tmp_path / "vehicle.sqlite", role="vehicle", mission="t", meta={})
         server = VehicleServer(
@@ -142,7 +144,7 @@ def test_the_server_serves_a_generic_vehicle(tmp_path: Path) -> None:
         replies.append(await ctl.reply())
         assert ctl.codec.session_key is not None
         receiver = DatagramReceiver(ctl.codec.session_key)
-        samples = [t for t in map(receiver.accept, datagrams) if isinstance(t, Telemetry)]
+        samples = [t for t in map(receiver.accept, datagrams) if isinstance(t, TelemetryRecord)]
         ctl.conn.close()
         await link.aclose()
         await server.stop()

@@ -11,11 +11,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from runtime.eventlog import Event, EventLog, TelemetrySample
+from runtime.eventlog import Event, EventLog, TelemetryRecord
 from runtime.watch.state import WatchState, arcs_from_net_json, snapshot_at
 from tests.runtime.watch.conftest import net_from_json
 
-Rows = tuple[str, list[Event], list[TelemetrySample]]
+Rows = tuple[str, list[Event], list[TelemetryRecord]]
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +78,7 @@ def test_commands_and_telemetry_at_a_time_come_from_the_rows_before_it(rows: Row
         assert (command["status"] == "awaiting reply") is not answered
     assert snapshot.telemetry is not None
     assert snapshot.telemetry["time"] is not None and snapshot.telemetry["time"] <= middle
-    later = [s for s in samples if s.time > float(snapshot.telemetry["vehicle_time"] or 0)]
+    later = [s for s in samples if s.vehicle_time > float(snapshot.telemetry["vehicle_time"] or 0)]
     assert later  # a later sample exists, so the cut-off mattered
     assert snapshot.link["handshakes"] == 1
     before = snapshot_at(net_json, events, samples, -1.0)
@@ -138,8 +138,8 @@ def test_bookkeeping_of_commands_link_and_end() -> None:
             Event(9, 4.0, "fire", {"transition": "nowhere"}),
         ],
         [
-            TelemetrySample(15.0, 1, 1.0, 2.0, 3.0, 90.0),
-            TelemetrySample(16.0, 2, 1.5, 2.0, math.nan, 91.0),
+            TelemetryRecord(15.0, 1.0, 2.0, 3.0, 90.0, seq=1),
+            TelemetryRecord(16.0, 1.5, 2.0, math.nan, 91.0, seq=2),
         ],
     )
     snap = state.snapshot()

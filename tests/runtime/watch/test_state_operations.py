@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from coral_lang.mission import load_mission
 from coral_lang.net import Net, TransitionKind
 from coral_lang.profile import TIME_OUT
-from runtime.eventlog import Event, EventLog, TelemetrySample
+from runtime.eventlog import Event, EventLog, TelemetryRecord
 from runtime.watch.state import (
     FINISHED_COMMANDS_KEPT,
     FIRED_KEPT,
@@ -29,7 +29,7 @@ from runtime.watch.state import (
 )
 from tests.runtime.watch.conftest import POOL_MISSION
 
-Rows = tuple[str, list[Event], list[TelemetrySample]]
+Rows = tuple[str, list[Event], list[TelemetryRecord]]
 
 
 @pytest.fixture(scope="module")
@@ -264,6 +264,7 @@ def test_a_command_awaits_its_replies_until_its_time_out() -> None:
     assert done.fired_total == 3
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(
     count=st.integers(min_value=0, max_value=3000),
@@ -296,7 +297,7 @@ def test_the_track_is_bounded_even_and_ends_with_the_newest_sample(
         )
     # Batching does not matter: the track depends on the samples only.
     state_a, state_b = WatchState(None), WatchState(None)
-    samples = [TelemetrySample(float(k), k, float(k), 1.0, 2.0, 10.0) for k in range(count)]
+    samples = [TelemetryRecord(float(k), float(k), 1.0, 2.0, 10.0, seq=k) for k in range(count)]
     state_a.advance(samples=samples)
     start = 0
     for size in [*batches, count]:
@@ -312,6 +313,7 @@ def test_headings_crossing_north_do_not_jump() -> None:
     assert [p[4] for p in track.points()] == [350.0, 355.0, 362.0, 368.0, None, 372.0, 359.0]
 
 
+@pytest.mark.slow
 def test_a_long_log_gives_a_snapshot_of_bounded_size() -> None:
     """A day-long mission: 60 000 commands, 180 000 firings, 200 000 samples, 3 000 operator
     actions and 2 000 outages; the snapshot stays small and keeps the newest of each."""
@@ -349,7 +351,7 @@ def test_a_long_log_gives_a_snapshot_of_bounded_size() -> None:
     state.advance(events)
     state.advance(
         samples=[
-            TelemetrySample(k * 0.3, k, 1.0 + k * 1e-4, 2.0, 3.0, float(k % 360))
+            TelemetryRecord(k * 0.3, 1.0 + k * 1e-4, 2.0, 3.0, float(k % 360), seq=k)
             for k in range(200_000)
         ]
     )
@@ -375,7 +377,7 @@ def test_samples_of_a_run_at_speed_are_put_back_on_the_controllers_clock() -> No
     assert clock_rate({"speed": 5.0, "realtime": False, "vehicle": "sim"}) == 1.0
     state = WatchState(None, rate)
     state.advance([_ev(1, 10.0, "handshake", offset=100.0, delay=0.01)])
-    sample = TelemetrySample(160.0, 1, 1.0, 2.0, 3.0, 90.0)
+    sample = TelemetryRecord(160.0, 1.0, 2.0, 3.0, 90.0, seq=1)
     assert state.sample_time(sample) == pytest.approx(20.0)
     state.advance(samples=[sample])
     assert state.snapshot().telemetry is not None
