@@ -56,6 +56,7 @@ import base64
 import binascii
 import datetime as dt
 import json
+import shlex
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -209,6 +210,9 @@ class CertificateCheck:
     """When it stops being accepted (None: no expiry recorded)."""
     checker_revision: int = OLDEST_REVISION
     """The checker revision that wrote it (`analysis.soundness`)."""
+    mission: str | None = None
+    """The mission file the check was for, when the caller named it: later refusals
+    (the engine's) name it in the command that gets a new certificate."""
 
 
 def check_certificate(
@@ -218,6 +222,7 @@ def check_certificate(
     profile_content: Mapping[str, object] | None = None,
     trusted: TrustStore | None = None,
     clock: Clock = _utc_now,
+    mission: str | Path | None = None,
 ) -> CertificateCheck:
     """Accept the certificate at ``path`` for ``net``, or explain why not.
 
@@ -230,7 +235,9 @@ def check_certificate(
     ``trusted`` is the set of public keys whose signatures are accepted; the runtime
     always gives one (perhaps empty). Without it the signature is not checked: that is
     for tools that only want to know what a certificate claims, never for a run.
-    ``clock`` decides expiry.
+    ``clock`` decides expiry. ``mission`` is the file ``net`` was compiled from, when
+    the caller knows it: a refusal's way out then names it (``coral-check verify
+    pool.coral --certificate ...``) instead of ``MISSION``.
 
     Raises:
         CertificateError: the file is missing, not a certificate or malformed (the
@@ -247,7 +254,7 @@ def check_certificate(
             valid one.
     """
     path = Path(path)
-    how = _how(path, profile_content)
+    how = _how(path, profile_content, mission)
     data = read_certificate(path, how)
     return check_certificate_data(
         net,
@@ -257,6 +264,7 @@ def check_certificate(
         trusted=trusted,
         clock=clock,
         how=how,
+        mission=mission,
     )
 
 
@@ -314,13 +322,14 @@ def check_certificate_data(
     trusted: TrustStore | None = None,
     clock: Clock = _utc_now,
     how: str = "",
+    mission: str | Path | None = None,
 ) -> CertificateCheck:
     """`check_certificate` on content already read (``source`` names it in messages);
     ``coral-run --verify`` checks the certificate it just made this way, in memory."""
     path = Path(source)
-    how = how or _how(path, profile_content)
+    how = how or _how(path, profile_content, mission)
     try:
-        return _check(net, data, path, profile_content, trusted, clock, how)
+        return _check(net, data, path, profile_content, trusted, clock, how, mission)
     except RecursionError:  # canonical JSON of absurdly nested content
         raise CertificateError(
             f"{path}: malformed certificate (nested too deeply); {how}"
@@ -335,6 +344,7 @@ def _check(
     trusted: TrustStore | None,
     clock: Clock,
     how: str,
+    mission: str | Path | None = None,
 ) -> CertificateCheck:
     fmt = data.get("format")
     if type(fmt) is not int or fmt != CERTIFICATE_FORMAT:
@@ -343,7 +353,7 @@ def _check(
             f"{json.dumps(fmt)[:40]}); {how}"
         )
     _validate(path, data, how)
-    signer = None if trusted is None else _check_signature(path, data, trusted, how)
+    signer = None if trusted is None else _check_signature(path, data, trusted, how, mission)
     expires = data.get("expires")
     if isinstance(expires, str) and clock().astimezone(dt.UTC) >= _parse_time(expires):
         raise CertificateError(f"{path}: the certificate expired at {expires}; {how}")
@@ -416,6 +426,7 @@ def _check(
         signer=signer,
         expires=expires if isinstance(expires, str) else None,
         checker_revision=revision,
+        mission=None if mission is None else str(mission),
     )
 
 
@@ -513,17 +524,24 @@ def _properties(data: Mapping[str, object]) -> list[dict[str, object]]:
     return [p for p in listed if isinstance(p, dict)]
 
 
-def _check_signature(path: Path, data: Mapping[str, object], trusted: TrustStore, how: str) -> str:
+def _check_signature(
+    path: Path,
+    data: Mapping[str, object],
+    trusted: TrustStore,
+    how: str,
+    mission: str | Path | None = None,
+) -> str:
     """The key id of the trusted key whose signature covers ``data``, else a refusal:
     unsigned, unknown signer, or content edited after signing."""
     signature = data.get("signature")
     if signature is None:
+        shown = _shown_mission(mission)
         raise CertificateError(
             f"{path}: the certificate is not signed, and a run accepts only certificates "
             f"signed by a trusted key ({trusted.describe()}); sign it with 'coral-check "
-            "verify MISSION --certificate FILE --signing-key KEY' and trust KEY.pub with "
-            "--trusted-keys, or, on a development machine, verify and run in one step with "
-            "'coral-run MISSION --verify'"
+            f"verify {shown} --certificate {shlex.quote(str(path))} --signing-key KEY' and "
+            "trust KEY.pub with --trusted-keys, or, on a development machine, verify and run "
+            f"in one step with 'coral-run {shown} --verify'"
         )
     assert isinstance(signature, dict)  # checked by _validate
     algorithm, kid, value = (signature.get(k) for k in ("algorithm", "key_id", "value"))
@@ -608,19 +626,27 @@ def parse_expires(text: str, now: dt.datetime) -> dt.datetime:
     return moment
 
 
-def _how(path: Path, profile_content: Mapping[str, object] | None) -> str:
-    """How to get a valid certificate; names the profile file unless it is bundled
-    (``coral-check`` finds those by the vehicle's name)."""
+def _shown_mission(mission: str | Path | None) -> str:
+    """``mission`` as a shell word for a command to copy, or ``MISSION`` when unknown."""
+    return "MISSION" if mission is None else shlex.quote(str(mission))
+
+
+def _how(
+    path: Path, profile_content: Mapping[str, object] | None, mission: str | Path | None = None
+) -> str:
+    """How to get a valid certificate: a command to copy, naming the mission (when
+    known), the certificate and the profile file unless it is bundled (``coral-check``
+    finds those by the vehicle's name)."""
     option = ""
     if profile_content is not None:
         vehicle, file = profile_content.get("vehicle"), profile_content.get("file")
         if isinstance(vehicle, str) and isinstance(file, str):
             bundled = bundled_profile_path(vehicle)
             if bundled is None or bundled.resolve() != Path(file).resolve():
-                option = f" --profile {file}"
+                option = f" --profile {shlex.quote(file)}"
     return (
-        f"run 'coral-check verify MISSION{option} --certificate {path} --signing-key KEY' "
-        "and fix what it reports"
+        f"run 'coral-check verify {_shown_mission(mission)}{option} --certificate "
+        f"{shlex.quote(str(path))} --signing-key KEY' and fix what it reports"
     )
 
 

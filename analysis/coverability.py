@@ -25,19 +25,18 @@ still reported unbounded (the tree proves it), listed in ``missing_pumps``.
 
 from __future__ import annotations
 
-import time
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
+from analysis.budget import Budget, stage, work_limit_reason
 from analysis.inputs import legal_trace
 from coral_lang.net import Net
 
 Marking = tuple[int, ...]
-Clock = Callable[[], float]
 
 OMEGA = -1
 """ω in an internal tree marking: more tokens than any bound. Never in a public result."""
@@ -158,7 +157,7 @@ class _Tree:
         # node markings, ω as _BIG; none when M0 itself is too large (build stops at once)
         self.rows = [_numeric([start])[0]] if max(start, default=0) <= MAX_EXACT_TOKENS else []
 
-    def build(self, max_nodes: int, deadline: float | None, clock: Clock) -> tuple[bool, str]:
+    def build(self, max_nodes: int, budget: Budget) -> tuple[bool, str]:
         too_many = self._too_many(self.nodes[0].marking, range(len(self.nodes[0].marking)))
         if too_many:
             return False, too_many
@@ -166,9 +165,9 @@ class _Tree:
         queue = deque([0])
         while queue:
             if len(self.nodes) >= max_nodes:
-                return False, f"node budget of {max_nodes} reached"
-            if deadline is not None and clock() > deadline:
-                return False, "time limit reached"
+                return False, work_limit_reason(max_nodes, "node")
+            if budget.expired():
+                return False, budget.time_reason(len(self.nodes), "node")
             index = queue.popleft()
             marking = self.nodes[index].marking
             chain: list[int] | None = None
@@ -272,8 +271,7 @@ def _numeric(markings: Sequence[Marking | list[int]]) -> npt.NDArray[np.int64]:
 def coverability(
     net: Net,
     max_nodes: int = DEFAULT_MAX_NODES,
-    time_limit: float | None = DEFAULT_TIME_LIMIT,
-    clock: Clock = time.monotonic,
+    budget: Budget | None = None,
     find_pumps: bool = True,
 ) -> CoverabilityResult:
     """Build the Karp-Miller tree of ``net`` and report boundedness with evidence.
@@ -281,16 +279,16 @@ def coverability(
     Args:
         net: The net.
         max_nodes: Node budget for the tree.
-        time_limit: Seconds for building the tree; None for no limit.
-        clock: Monotonic clock.
+        budget: Bounds the time to build the tree (default: `DEFAULT_TIME_LIMIT`
+            seconds from now).
         find_pumps: Also construct a replay-checked pumping trace per unbounded place.
 
     Returns:
         A `CoverabilityResult`; never loops forever.
     """
-    deadline = None if time_limit is None else clock() + time_limit
+    budget = stage(budget, DEFAULT_TIME_LIMIT)
     tree = _Tree(net)
-    complete, reason = tree.build(max_nodes, deadline, clock)
+    complete, reason = tree.build(max_nodes, budget)
     n_places = len(net.places)
     first_omega: dict[int, int] = {}
     top = [0] * n_places

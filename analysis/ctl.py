@@ -32,8 +32,7 @@ formulas checked with the same `CtlChecker`, is computed once.
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -42,6 +41,7 @@ import numpy.typing as npt
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
+from analysis.budget import Budget, BudgetExceeded
 from analysis.stategraph import StateGraph
 from analysis.statespace import StateSpace
 from coral_lang.formula import (
@@ -71,7 +71,6 @@ from coral_lang.net import Net, TransitionKind
 __all__ = [
     "CtlChecker",
     "CtlError",
-    "CtlTimeout",
     "NetIndex",
     "StateEvaluator",
     "marking_table",
@@ -79,7 +78,6 @@ __all__ = [
 
 BoolArray = npt.NDArray[np.bool_]
 IntArray = npt.NDArray[np.int64]
-Clock = Callable[[], float]
 
 CACHE_CELLS = 1 << 28
 """Most booleans the sub-formula cache of a `CtlChecker` keeps (256 MB); past it, it
@@ -88,10 +86,6 @@ starts afresh with the next formula."""
 
 class CtlError(ValueError):
     """The formula is not CTL, or names a place or transition the net lacks."""
-
-
-class CtlTimeout(Exception):
-    """The time budget ran out while labelling; the formula stays undecided."""
 
 
 class NetIndex:
@@ -304,8 +298,8 @@ class CtlChecker:
         graph: the reachability graph (node 0 is the initial marking).
         markings: the `marking_table` of ``graph.space``, if already built.
         index: the net's `NetIndex`, if already built.
-        deadline: a ``clock()`` value past which labelling stops with `CtlTimeout`.
-        clock: seconds counter.
+        budget: its deadline stops labelling with `analysis.budget.BudgetExceeded` (the
+            formula stays undecided); None: no limit.
     """
 
     def __init__(
@@ -314,16 +308,14 @@ class CtlChecker:
         *,
         markings: npt.NDArray[np.integer] | None = None,
         index: NetIndex | None = None,
-        deadline: float | None = None,
-        clock: Clock = time.perf_counter,
+        budget: Budget | None = None,
     ) -> None:
         self.graph = graph
         self.n = graph.n_states
         self.index = index or NetIndex(graph.space.net)
         table = marking_table(graph.space) if markings is None else markings
         self.states = StateEvaluator(self.index, table, graph.dead)
-        self.deadline = deadline
-        self.clock = clock
+        self.budget = budget
         self._keys: dict[object, int] = {}
         self._nodes: list[_Node] = []
         self._values: list[BoolArray | None] = []
@@ -398,7 +390,7 @@ class CtlChecker:
 
         Raises:
             CtlError: ``f`` is not CTL, or names an unknown place or transition.
-            CtlTimeout: the deadline passed.
+            BudgetExceeded: the budget's deadline passed.
         """
         if not is_ctl(f):
             raise CtlError("not a CTL formula: a temporal operator is not directly under A or E")
@@ -447,8 +439,8 @@ class CtlChecker:
         return order
 
     def _check_time(self) -> None:
-        if self.deadline is not None and self.clock() > self.deadline:
-            raise CtlTimeout("time limit reached while labelling")
+        if self.budget is not None and self.budget.expired():
+            raise BudgetExceeded(f"labelling stopped: {self.budget.time_reason()}")
 
     # -- labelling -------------------------------------------------------------------
 

@@ -24,9 +24,10 @@ How a formula is decided:
   every place bounded by one by a P-invariant), StableMarking (some place keeps one
   count in every reachable marking).
 
-Budgets (`Budget`): states, seconds for the whole session, graph edges and LTL product
-edges. When one runs out, the formulas it leaves undecided get ``value=None``
-(``CANNOT_COMPUTE``); an answer is never guessed. Partial results are used only
+Limits (`QueryLimits`): states, seconds for the whole session (one
+`analysis.budget.Budget`), graph edges and LTL product edges. When one runs out, the
+formulas it leaves undecided get ``value=None`` (``CANNOT_COMPUTE``); an answer is never
+guessed. Partial results are used only
 where they are proofs: a marking found in an incomplete search decides ``EF``/``AG``;
 a deadlock found proves ReachabilityDeadlock and refutes Liveness.
 """
@@ -41,7 +42,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from analysis.ctl import CtlChecker, CtlError, CtlTimeout, NetIndex, StateEvaluator, marking_table
+from analysis import budget as budgets
+from analysis.budget import BudgetExceeded, Clock
+from analysis.ctl import CtlChecker, CtlError, NetIndex, StateEvaluator, marking_table
 from analysis.mccxml import MccProperty, PlaceBound
 from analysis.stategraph import GraphError, StateGraph, build_graph, scc_labels
 from analysis.statespace import STOPPED_BY_REQUEST, StateSpace, explore
@@ -65,7 +68,7 @@ __all__ = [
     "GLOBAL_EXAMINATIONS",
     "QUERY_EXAMINATIONS",
     "Answer",
-    "Budget",
+    "QueryLimits",
     "QuerySession",
     "examination_of",
 ]
@@ -93,6 +96,9 @@ EXPLICIT = ("EXPLICIT", "STATE_COMPRESSION")
 STATE_EQUATION_SECONDS = 60.0
 """Most seconds the z3 proof of deadlock freedom may take when a search gave up."""
 
+INVARIANT_SECONDS = 10.0
+"""Most seconds the P-invariants behind OneSafe and UpperBounds may take."""
+
 STATE_EQUATION_CELLS = 25_000_000
 """Largest places x transitions the state equation takes (it builds dense matrices)."""
 """Technique words (the MCC's) of answers read off the explicit state space."""
@@ -105,7 +111,6 @@ TABLE_CELLS = 1 << 27
 """Largest ``states x places`` kept as a table of markings (one byte per cell on most
 nets); larger state spaces are read block by block from their packed keys."""
 
-Clock = Callable[[], float]
 BoolArray = npt.NDArray[np.bool_]
 
 
@@ -121,8 +126,9 @@ def examination_of(prop: MccProperty) -> str | None:
 
 
 @dataclass(frozen=True)
-class Budget:
-    """Limits of one session; ``None`` is no limit.
+class QueryLimits:
+    """Limits of one session; ``None`` is no limit (the session turns them into one
+    `analysis.budget.Budget`, shared by every search and formula).
 
     Attributes:
         max_states: markings stored by a search.
@@ -246,12 +252,12 @@ class QuerySession:
 
     Args:
         net: the net.
-        budget: the limits.
-        clock: seconds counter (tests pass a fake one).
+        limits: the limits.
+        clock: seconds counter of the session's budget (tests pass a fake one).
     """
 
     net: Net
-    budget: Budget = field(default_factory=Budget)
+    limits: QueryLimits = field(default_factory=QueryLimits)
     clock: Clock = time.perf_counter
     shared_seconds: float = 0.0
     space: StateSpace | None = None
@@ -260,7 +266,7 @@ class QuerySession:
 
     def __post_init__(self) -> None:
         self.index = NetIndex(self.net)
-        self.started = self.clock()
+        self.budget = budgets.Budget(self.limits.time_limit, clock=self.clock)
         self._table: npt.NDArray[np.integer] | None = None
         self._ctl: CtlChecker | None = None
         self._reduced: StateSpace | None = None
@@ -270,17 +276,11 @@ class QuerySession:
 
     def remaining(self) -> float | None:
         """Seconds left of the session's time limit (``None``: no limit)."""
-        if self.budget.time_limit is None:
-            return None
-        return max(0.0, self.budget.time_limit - (self.clock() - self.started))
+        return self.budget.remaining()
 
     def out_of_time(self) -> bool:
         left = self.remaining()
         return left is not None and left <= 0
-
-    def _deadline(self) -> float | None:
-        left = self.remaining()
-        return None if left is None else self.clock() + left
 
     def full_space(self) -> StateSpace:
         """The (unreduced) state space, explored once within the budgets; it may be
@@ -289,9 +289,8 @@ class QuerySession:
             start = self.clock()
             self.space = explore(
                 self.net,
-                max_states=self.budget.max_states,
-                time_limit=self.remaining(),
-                clock=self.clock,
+                max_states=self.limits.max_states,
+                budget=self.budget,
             )
             self.shared_seconds += self.clock() - start
         return self.space
@@ -322,9 +321,8 @@ class QuerySession:
             try:
                 self.graph = build_graph(
                     space,
-                    max_edges=self.budget.max_edges,
-                    time_limit=self.remaining(),
-                    clock=self.clock,
+                    max_edges=self.limits.max_edges,
+                    budget=self.budget,
                 )
             except GraphError as exc:
                 self.graph_error = str(exc)
@@ -399,7 +397,7 @@ class QuerySession:
         if isinstance(q, PlaceBound):
             return self._bound(prop.id, q)
         if self.out_of_time():
-            return Answer(prop.id, None, reason="time limit reached")
+            return Answer(prop.id, None, reason=self.budget.time_reason())
         if _initial_only(q):
             return self._initial(prop.id, q)
         if reach is not None:
@@ -438,9 +436,8 @@ class QuerySession:
 
         space = explore(
             self.net,
-            max_states=self.budget.max_states,
-            time_limit=self.remaining(),
-            clock=self.clock,
+            max_states=self.limits.max_states,
+            budget=self.budget,
             stop_when=stop_when,
         )
         if space.stopped_reason != STOPPED_BY_REQUEST:
@@ -531,12 +528,13 @@ class QuerySession:
         if graph is None:
             return Answer(ident, None, method="ctl", reason=self._why_no_graph())
         if self._ctl is None:
-            self._ctl = CtlChecker(graph, markings=self.table(), index=self.index, clock=self.clock)
-        self._ctl.deadline = self._deadline()
+            self._ctl = CtlChecker(
+                graph, markings=self.table(), index=self.index, budget=self.budget
+            )
         try:
             value = self._ctl.holds(q)
-        except CtlTimeout:
-            return Answer(ident, None, method="ctl", reason="time limit reached")
+        except BudgetExceeded as exc:
+            return Answer(ident, None, method="ctl", reason=exc.reason)
         trace = self._ctl_trace(q, value)
         return Answer(ident, value, EXPLICIT, method="ctl", trace=trace)
 
@@ -572,13 +570,17 @@ class QuerySession:
         if graph is None:
             return Answer(ident, None, method="ltl", reason=self._why_no_graph())
         try:
-            result = check_ltl(graph, q, max_product_edges=self.budget.max_product_edges)
+            result = check_ltl(
+                graph, q, max_product_edges=self.limits.max_product_edges, budget=self.budget
+            )
+        except BudgetExceeded as exc:
+            return Answer(ident, None, method="ltl", reason=exc.reason)
         except GraphError as exc:
             return Answer(ident, None, method="ltl", reason=str(exc))
         except LtlError as exc:
             return Answer(ident, None, method="ltl", reason=f"cannot check: {exc}")
         if self.out_of_time():
-            return Answer(ident, None, method="ltl", reason="time limit reached")
+            return Answer(ident, None, method="ltl", reason=self.budget.time_reason())
         if result.holds:
             return Answer(ident, True, EXPLICIT, method="ltl")
         prefix = tuple(self.net.transitions[t].name for _, t, _ in result.prefix if t >= 0)
@@ -589,7 +591,7 @@ class QuerySession:
 
     def _bound(self, ident: str, q: PlaceBound) -> Answer:
         if self.out_of_time() and self.space is None:
-            return Answer(ident, None, method="bound", reason="time limit reached")
+            return Answer(ident, None, method="bound", reason=self.budget.time_reason())
         cols = [self.index.place[p] for p in q.places]
         best, found = self._scan({}, {0: cols})[0]
         return self._bound_answer(ident, cols, best, found)
@@ -637,9 +639,7 @@ class QuerySession:
         if self._invariants is None:
             from analysis.invariants import p_invariants
 
-            left = self.remaining()
-            limit = 10.0 if left is None else max(0.1, min(10.0, left))
-            basis = p_invariants(self.net, time_limit=limit)
+            basis = p_invariants(self.net, budget=self.budget.child(seconds=INVARIANT_SECONDS))
             self._invariants = [inv.weights for inv in basis.invariants]
         return self._invariants
 
@@ -679,11 +679,7 @@ class QuerySession:
             if self._reduced is None:
                 start = self.clock()
                 self._reduced = explore(
-                    self.net,
-                    max_states=self.budget.max_states,
-                    time_limit=self.remaining(),
-                    por=True,
-                    clock=self.clock,
+                    self.net, max_states=self.limits.max_states, budget=self.budget, por=True
                 )
                 self.shared_seconds += self.clock() - start
             space, techniques = self._reduced, (*EXPLICIT, "STUBBORN_SETS")
@@ -702,9 +698,7 @@ class QuerySession:
         n_places, n_transitions = len(self.net.places), len(self.net.transitions)
         if n_places * n_transitions > STATE_EQUATION_CELLS:
             return None
-        left = self.remaining()
-        limit = STATE_EQUATION_SECONDS if left is None else min(STATE_EQUATION_SECONDS, left)
-        if limit <= 0:
+        if self.out_of_time():
             return None
         from analysis import stateeq  # z3 and the invariants: only when a search gave up
 
@@ -712,8 +706,8 @@ class QuerySession:
         result = stateeq.check_unreachable(
             self.net,
             stateeq.deadlocks(),
-            timeout_ms=max(1, int(limit * 1000)),
-            time_limit=limit,
+            query_seconds=STATE_EQUATION_SECONDS,
+            budget=self.budget.child(seconds=STATE_EQUATION_SECONDS),
         )
         self.shared_seconds += self.clock() - start
         if not isinstance(result, stateeq.Proven):

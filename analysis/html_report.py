@@ -1,8 +1,11 @@
 """``coral-check --format html``: one self-contained page per run.
 
-For each file: the diagnostics, the verdict table (property, verdict, method, evidence),
-a drawing of the net (`analysis.netdraw`), every counterexample step by step, the
-state-space figures and the structural facts (class, P- and T-invariants...).
+For each file: the diagnostics, the verdict table (property, verdict, method, evidence,
+and each finding located as ``file:line:col``, as in the text report and SARIF), a
+drawing of the net (`analysis.netdraw`), every counterexample step by step (and the
+witness of each proven reachability property), the state-space figures and the
+structural facts (class, P- and T-invariants...). A trace shows its first
+`analysis.report.MAX_TRACE_STEPS` steps and says how many more the JSON document holds.
 
 A counterexample is shown twice. As a list that needs no script: each step with the
 transition fired, its source lines (the step's line marked) and the marking after it.
@@ -27,7 +30,15 @@ from dataclasses import dataclass
 
 from analysis.netdraw import Layout, NetDrawing, draw_net
 from analysis.outcome import FileOutcome, worst_exit_code
-from analysis.report import Evidence, PropertyResult, Report, Step, Verdict
+from analysis.report import (
+    MAX_TRACE_STEPS,
+    Evidence,
+    PropertyResult,
+    Report,
+    Step,
+    Verdict,
+    located_findings,
+)
 from coral_lang.diagnostics import Span
 from coral_lang.net import Net, format_tokens
 
@@ -116,6 +127,8 @@ def _counterexample(
     evidence = prop.evidence
     assert net is not None and evidence is not None
     frames, problem = _frames(net, evidence)
+    hidden = len(frames) - 1 - MAX_TRACE_STEPS
+    frames = frames[: MAX_TRACE_STEPS + 1]  # the initial marking, then the steps shown
     files = []
     for frame in frames:
         span = frame.step.span if frame.step else None
@@ -162,10 +175,17 @@ def _counterexample(
         )
     if problem:
         note += f'<p class="note warn">Replay stopped: {_e(problem)}.</p>'
+    if hidden > 0:
+        note += (
+            f'<p class="note more-steps">The first {MAX_TRACE_STEPS} steps are shown; '
+            f"... {hidden} more step{'' if hidden == 1 else 's'} (full trace in --format json)."
+            "</p>"
+        )
     panes = "".join(_source_pane(f, outcome.sources[f], i) for i, f in enumerate(files))
     picture = _drawing_box(drawing.svg) if drawing.svg else ""
+    kind = "cx" if prop.verdict is not Verdict.PROVEN else "cx witness"
     return (
-        f'<section class="cx" id="{_e(section_id)}">'
+        f'<section class="{kind}" id="{_e(section_id)}">'
         f"<h4>{_e(prop.title)} {_verdict_badge(prop)}</h4>"
         f'<p class="detail">{_e(prop.detail)}</p>{note}'
         '<div class="controls" hidden>'
@@ -203,8 +223,14 @@ def _more_counterexamples(prop: PropertyResult) -> str:
             f'<li>{_e(step.description)} <span class="loc">'
             f"{_e(f'{step.span.file}:{step.span.line}' if step.span else 'no source position')}"
             "</span></li>"
-            for step in evidence.trace
+            for step in evidence.trace[:MAX_TRACE_STEPS]
         )
+        hidden = len(evidence.trace) - MAX_TRACE_STEPS
+        if hidden > 0:
+            steps += (
+                f'<li class="more-steps">... {hidden} more step{"" if hidden == 1 else "s"} '
+                "(full trace in --format json)</li>"
+            )
         reached = format_tokens((evidence.marking or {}).items())
         blocks.append(
             f'<li class="more-cx"><p>Counterexample {number} of {total}: reaches '
@@ -251,17 +277,42 @@ def _has_counterexample(prop: PropertyResult) -> bool:
     )
 
 
-def _verdict_table(report: Report, prefix: str) -> str:
+def _has_witness(prop: PropertyResult) -> bool:
+    """A proven property that comes with a run showing it (a reachable final marking)."""
+    evidence = prop.evidence
+    return (
+        prop.verdict is Verdict.PROVEN
+        and evidence is not None
+        and bool(evidence.trace or evidence.loop)
+    )
+
+
+def _findings(prop: PropertyResult, net: Net | None) -> str:
+    """Each located finding of a property that is not proven, ``file:line:col``
+    first, as the text report and SARIF locate them."""
+    rows = [
+        f'<li><code class="at">{_e(f.span)}</code> {_e(f.message)}</li>'
+        for f in located_findings(prop, net)
+        if f.span is not None
+    ]
+    return f'<ul class="findings">{"".join(rows)}</ul>' if rows else ""
+
+
+def _verdict_table(report: Report, prefix: str, net: Net | None = None) -> str:
     rows = []
     for prop in report.properties:
         evidence = ""
-        if _has_counterexample(prop):
+        if _has_counterexample(prop) or _has_witness(prop):
             assert prop.evidence is not None
             count = len(prop.evidence.trace) + len(prop.evidence.loop)
+            what, tag = (
+                ("counterexample", "cx") if _has_counterexample(prop) else ("witness", "wit")
+            )
             evidence = (
-                f' <a href="#{prefix}-cx-{_anchor(prop.key)}">counterexample, '
+                f' <a href="#{prefix}-{tag}-{_anchor(prop.key)}">{what}, '
                 f"{count} step{'' if count == 1 else 's'}</a>"
             )
+        evidence += _findings(prop, net)
         where = f' <span class="muted">({_e(prop.span)})</span>' if prop.span else ""
         rows.append(
             f'<tr class="prop" data-key="{_e(prop.key)}"><td>{_e(prop.title)}{where}</td>'
@@ -359,9 +410,14 @@ def _file_section(outcome: FileOutcome, index: int, layout: Layout) -> str:
     if report is None:
         if status == "errors":
             parts.append("<p>Not verified: fix the errors first.</p>")
+        elif status == "part":
+            parts.append(
+                f"<p>A part of <code>{_e(outcome.part_of)}</code>: compiled and linted "
+                "with it, and verified when that mission is checked.</p>"
+            )
         parts.append("</section>")
         return "".join(parts)
-    parts.append(f"<h3>Verdicts</h3>{_verdict_table(report, prefix)}")
+    parts.append(f"<h3>Verdicts</h3>{_verdict_table(report, prefix, net)}")
     drawing = draw_net(net, layout) if net is not None else NetDrawing("", "none")
     parts.append(_net_figure(drawing))
     shown = [p for p in report.properties if _has_counterexample(p)]
@@ -369,6 +425,13 @@ def _file_section(outcome: FileOutcome, index: int, layout: Layout) -> str:
         parts.append("<h3>Counterexamples</h3>")
         parts.extend(
             _counterexample(p, outcome, drawing, f"{prefix}-cx-{_anchor(p.key)}") for p in shown
+        )
+    witnesses = [p for p in report.properties if _has_witness(p)]
+    if witnesses:
+        parts.append("<h3>Witnesses</h3>")
+        parts.extend(
+            _counterexample(p, outcome, drawing, f"{prefix}-wit-{_anchor(p.key)}")
+            for p in witnesses
         )
     parts.append(f"<h3>State space</h3>{_statespace(report)}")
     parts.append(f"<h3>Structure</h3>{_structure(report)}")
@@ -455,7 +518,7 @@ table.figures{width:auto}table.figures th{font-weight:500;color:var(--muted)}
 .muted{color:var(--muted)}.error,.warn{color:var(--bad)}
 .badge{display:inline-block;padding:0 .55em;border-radius:1em;font-weight:600;font-size:.78rem;
 text-transform:uppercase;letter-spacing:.03em;vertical-align:middle}
-.v-proven,.v-clean,.v-note{background:#dafbe1;color:var(--ok)}
+.v-proven,.v-clean,.v-part,.v-note{background:#dafbe1;color:var(--ok)}
 .v-violated,.v-errors,.v-unreadable,.v-error{background:#ffebe9;color:var(--bad)}
 .v-inconclusive,.v-warning{background:#fff8c5;color:var(--maybe)}
 .drawing{overflow:auto;border:1px solid var(--line);border-radius:6px;background:#fff;
@@ -493,6 +556,7 @@ pre mark.ln{background:var(--hl)}
 .src pre{max-height:26rem}
 .src .ln.hit{background:var(--hl);box-shadow:inset 3px 0 var(--maybe)}
 ol.invariants li{margin:.15rem 0}
+ul.findings{margin:.3rem 0 0;padding-left:1.2rem}ul.findings code.at{color:var(--muted)}
 @media print{.controls{display:none}.drawing{max-height:none}}
 """
 

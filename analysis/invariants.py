@@ -11,22 +11,20 @@ combinations of rows of opposite sign, drop rows whose support contains another 
 and divide every row by the gcd of its entries. What remains are the minimal-support
 invariants, each the smallest integer vector on its support. Rows are Python ints, so
 nothing overflows. The number of rows can explode exponentially; ``max_rows`` and
-``time_limit`` bound the work, and the result then says ``complete=False`` and keeps
+a `Budget` bound the work, and the result then says ``complete=False`` and keeps
 only rows that are already invariants (each still a genuine invariant).
 """
 
 from __future__ import annotations
 
 import math
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
+from analysis.budget import Budget, BudgetExceeded, stage, work_limit_reason
 from analysis.structural import TooLargeForStructure, classify, incidence
 from coral_lang.net import Net
-
-Clock = Callable[[], float]
 
 DEFAULT_MAX_ROWS = 20_000
 DEFAULT_TIME_LIMIT = 20.0
@@ -125,17 +123,14 @@ class InvariantBasis:
 def semiflows(
     rows: Sequence[Sequence[int]],
     max_rows: int = DEFAULT_MAX_ROWS,
-    time_limit: float | None = DEFAULT_TIME_LIMIT,
-    clock: Clock = time.monotonic,
+    budget: Budget | None = None,
 ) -> tuple[list[tuple[int, ...]], bool, str]:
     """Minimal-support non-negative integer vectors v with ``sum_i v[i] * rows[i] = 0``.
 
     Args:
         rows: One row per variable (a place for P-invariants: the rows of C).
         max_rows: Stop when the working set exceeds this many rows.
-        time_limit: Stop after this many seconds (measured with ``clock``); None for no
-            limit.
-        clock: Monotonic seconds; injected so tests can be deterministic.
+        budget: Stop at its deadline (default: `DEFAULT_TIME_LIMIT` seconds from now).
 
     Returns:
         ``(vectors, complete, reason)``: the vectors are sorted; when ``complete`` is
@@ -143,7 +138,7 @@ def semiflows(
     """
     n = len(rows)
     m = len(rows[0]) if rows else 0
-    deadline = None if time_limit is None else clock() + time_limit
+    budget = stage(budget, DEFAULT_TIME_LIMIT)
     work: list[_Row] = [
         ([1 if j == i else 0 for j in range(n)], [int(v) for v in rows[i]], 1 << i)
         for i in range(n)
@@ -154,49 +149,38 @@ def semiflows(
         while pending:
             column = min(pending, key=lambda c: _growth(work, c))
             pending.remove(column)
-            work = _eliminate(work, column, max_rows, deadline, clock)
-    except _Stop as stop:
+            work = _eliminate(work, column, max_rows, budget)
+    except BudgetExceeded as stop:
         complete, reason = False, stop.reason
-        if stop.reason.startswith("time"):
-            reason = f"time limit of {time_limit} s"
     done = [r for r in work if not any(r[1])]
     vectors = sorted({tuple(r[0]) for r in done})
     return vectors, complete, reason
 
 
-class _Stop(Exception):
-    """A work limit was hit; the working set before this step is still valid."""
-
-    def __init__(self, reason: str) -> None:
-        super().__init__(reason)
-        self.reason = reason
+def _too_many_rows(max_rows: int) -> BudgetExceeded:
+    return BudgetExceeded(work_limit_reason(max_rows, "intermediate row"))
 
 
-def _check(deadline: float | None, clock: Clock) -> None:
-    if deadline is not None and clock() > deadline:
-        raise _Stop("time")
-
-
-def _eliminate(
-    work: list[_Row], column: int, max_rows: int, deadline: float | None, clock: Clock
-) -> list[_Row]:
-    """One Fourier-Motzkin step: cancel ``column`` with positive combinations."""
+def _eliminate(work: list[_Row], column: int, max_rows: int, budget: Budget) -> list[_Row]:
+    """One Fourier-Motzkin step: cancel ``column`` with positive combinations; raises
+    `BudgetExceeded` (the working set before this step is still valid) when the rows
+    would pass ``max_rows`` or the deadline passes."""
     zero = [r for r in work if r[1][column] == 0]
     positive = [r for r in work if r[1][column] > 0]
     negative = [r for r in work if r[1][column] < 0]
     if len(zero) + len(positive) * len(negative) > 8 * max_rows:
-        raise _Stop(f"more than {max_rows} intermediate rows")
+        raise _too_many_rows(max_rows)
     combined = list(zero)
     for a in positive:
-        _check(deadline, clock)
+        budget.check()
         for b in negative:
             fa, fb = -b[1][column], a[1][column]
             weights = [fa * x + fb * y for x, y in zip(a[0], b[0], strict=True)]
             residual = [fa * x + fb * y for x, y in zip(a[1], b[1], strict=True)]
             combined.append(_normalised(weights, residual, a[2] | b[2]))
-    result = _minimal_supports(combined, deadline, clock)
+    result = _minimal_supports(combined, budget)
     if len(result) > max_rows:
-        raise _Stop(f"more than {max_rows} intermediate rows")
+        raise _too_many_rows(max_rows)
     return result
 
 
@@ -218,7 +202,7 @@ def _normalised(weights: list[int], residual: list[int], support: int) -> _Row:
     return weights, residual, support
 
 
-def _minimal_supports(rows: list[_Row], deadline: float | None, clock: Clock) -> list[_Row]:
+def _minimal_supports(rows: list[_Row], budget: Budget) -> list[_Row]:
     """Keep rows whose support contains no other kept row's support.
 
     Two rows with equal support are proportional once all are minimal (the residual
@@ -229,7 +213,7 @@ def _minimal_supports(rows: list[_Row], deadline: float | None, clock: Clock) ->
     masks: list[int] = []
     for count, row in enumerate(ordered):
         if count % 512 == 0:
-            _check(deadline, clock)
+            budget.check()
         mask = row[2]
         if any(k & ~mask == 0 for k in masks):
             continue
@@ -241,8 +225,7 @@ def _minimal_supports(rows: list[_Row], deadline: float | None, clock: Clock) ->
 def p_invariants(
     net: Net,
     max_rows: int = DEFAULT_MAX_ROWS,
-    time_limit: float | None = DEFAULT_TIME_LIMIT,
-    clock: Clock = time.monotonic,
+    budget: Budget | None = None,
     max_cells: int = DEFAULT_MAX_CELLS,
 ) -> InvariantBasis:
     """Minimal-support P-invariants of ``net`` (y >= 0, y^T C = 0).
@@ -250,8 +233,7 @@ def p_invariants(
     Args:
         net: The net.
         max_rows: Work bound, see `semiflows`.
-        time_limit: Seconds, see `semiflows`.
-        clock: Monotonic clock for the time limit.
+        budget: Time limit, see `semiflows`.
         max_cells: Size budget, see `DEFAULT_MAX_CELLS`.
 
     Returns:
@@ -264,15 +246,14 @@ def p_invariants(
         rows = incidence(net).rows()
     except TooLargeForStructure as exc:  # a max_cells above the matrix's own limit
         return _basis("P", net.place_names, [], False, str(exc))
-    vectors, complete, reason = semiflows(rows, max_rows, time_limit, clock)
+    vectors, complete, reason = semiflows(rows, max_rows, budget)
     return _basis("P", net.place_names, vectors, complete, reason)
 
 
 def t_invariants(
     net: Net,
     max_rows: int = DEFAULT_MAX_ROWS,
-    time_limit: float | None = DEFAULT_TIME_LIMIT,
-    clock: Clock = time.monotonic,
+    budget: Budget | None = None,
     max_cells: int = DEFAULT_MAX_CELLS,
 ) -> InvariantBasis:
     """Minimal-support T-invariants of ``net`` (x >= 0, C x = 0).
@@ -280,8 +261,7 @@ def t_invariants(
     Args:
         net: The net.
         max_rows: Work bound, see `semiflows`.
-        time_limit: Seconds, see `semiflows`.
-        clock: Monotonic clock for the time limit.
+        budget: Time limit, see `semiflows`.
         max_cells: Size budget, see `DEFAULT_MAX_CELLS`.
 
     Returns:
@@ -296,7 +276,7 @@ def t_invariants(
     except TooLargeForStructure as exc:  # a max_cells above the matrix's own limit
         return _basis("T", names, [], False, str(exc))
     columns = [[int(v) for v in column] for column in matrix.T]
-    vectors, complete, reason = semiflows(columns, max_rows, time_limit, clock)
+    vectors, complete, reason = semiflows(columns, max_rows, budget)
     return _basis("T", names, vectors, complete, reason)
 
 
@@ -390,8 +370,7 @@ class InvariantReport:
 def invariant_report(
     net: Net,
     max_rows: int = DEFAULT_MAX_ROWS,
-    time_limit: float | None = DEFAULT_TIME_LIMIT,
-    clock: Clock = time.monotonic,
+    budget: Budget | None = None,
     max_cells: int = DEFAULT_MAX_CELLS,
 ) -> InvariantReport:
     """Compute P- and T-invariants and what they prove (coverage, bounds, classes).
@@ -399,15 +378,15 @@ def invariant_report(
     Args:
         net: The net.
         max_rows: Work bound for each elimination.
-        time_limit: Seconds for each elimination.
-        clock: Monotonic clock for the time limits.
+        budget: Time limit of each elimination (a child of it each; default
+            `DEFAULT_TIME_LIMIT` seconds each).
         max_cells: Size budget for each elimination, see `DEFAULT_MAX_CELLS`.
 
     Returns:
         The `InvariantReport`.
     """
-    p = p_invariants(net, max_rows, time_limit, clock, max_cells)
-    t = t_invariants(net, max_rows, time_limit, clock, max_cells)
+    p = p_invariants(net, max_rows, budget, max_cells)
+    t = t_invariants(net, max_rows, budget, max_cells)
     return InvariantReport(
         p=p,
         t=t,

@@ -6,10 +6,14 @@ whose time-out the Internet link can eat, two transitions racing for one token w
 nothing to decide between them. Each rule has a stable code, a severity, and a page in
 ``docs/rules.md`` (bad example, why it matters at sea, the fix).
 
-A finding is silenced on one line with a comment that gives the reason, on the line
-itself or the line above::
+A finding is silenced on one line with a comment that gives the reason, at the end of
+the line itself or alone on the line above::
 
     transition retry    # coral: allow CORAL207 -- either order is fine here
+
+A comment after code applies to that line only, never to the next: which findings a
+comment silences then depends on the lines it is written beside, not on how far the
+next statement is, so `coral-check fmt` can lay statements out without changing it.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.budget import Budget
 from analysis.statespace import StateSpace, explore
 from coral_lang import ast
 from coral_lang.compiler import CompileResult
@@ -78,7 +83,7 @@ class LintOptions:
         link_rtt_s: Worst round trip of the link to the vehicle, seconds (CORAL206).
         max_states: State budget for finding racing transitions (CORAL207); races
             beyond it are not reported.
-        time_limit: Seconds for that search.
+        time_limit: Seconds for that search (a slice of the caller's `Budget`).
         max_pairs_per_place: Candidate pairs examined per shared input place (CORAL207);
             a place with more consumers than that allows gets a note saying how many
             pairs were skipped.
@@ -94,6 +99,8 @@ def lint(
     result: CompileResult,
     options: LintOptions | None = None,
     space: StateSpace | None = None,
+    *,
+    budget: Budget | None = None,
 ) -> list[Diagnostic]:
     """The lint findings of a compiled mission, suppressions applied, in source order.
 
@@ -105,6 +112,8 @@ def lint(
             exploring again when it is unreduced and holds every state its own search
             would reach (it is complete, or has ``options.max_states`` states or more):
             both searches are breadth-first in one fixed order, so nothing is missed.
+        budget: The caller's budget (clock, deadline); CORAL207's own search takes a
+            slice of ``options.time_limit`` of it. None: a fresh one on the real clock.
 
     Returns:
         The findings; an empty list for a mission that did not compile (its errors come
@@ -118,7 +127,7 @@ def lint(
         *_unused_constants(result),
         *_place_usage(result.net),
         *_short_time_outs(result.net, result.profile, options),
-        *_unprioritised_conflicts(result.net, options, space),
+        *_unprioritised_conflicts(result.net, options, space, budget or Budget()),
     ]
     kept, suppression_findings = _apply_suppressions(findings, result.sources)
     return sorted([*kept, *suppression_findings], key=_order)
@@ -285,7 +294,7 @@ def _short_time_outs(
 
 
 def _unprioritised_conflicts(
-    net: Net, options: LintOptions, given: StateSpace | None
+    net: Net, options: LintOptions, given: StateSpace | None, budget: Budget
 ) -> Iterator[Diagnostic]:
     """Pairs of engine transitions (not vehicle replies) with equal priority that are both
     enabled in some reachable marking while their shared input places cannot feed both:
@@ -310,7 +319,8 @@ def _unprioritised_conflicts(
         return
     space = given
     if space is None or space.reduced or not (space.complete or space.states >= options.max_states):
-        space = explore(net, max_states=options.max_states, time_limit=options.time_limit)
+        search = budget.child(seconds=options.time_limit)
+        space = explore(net, max_states=options.max_states, budget=search)
     found: dict[int, int] = {}  # pair number -> first state where the two race
     # One pass over the stored markings, all pairs per block: unpacking markings is the
     # expensive part, so it must not be repeated per pair.
@@ -388,6 +398,9 @@ def _conflict_candidates(
 def _apply_suppressions(
     findings: list[Diagnostic], sources: dict[str, str]
 ) -> tuple[list[Diagnostic], list[Diagnostic]]:
+    """The findings no ``# coral: allow`` silences, and the problems with the
+    suppressions themselves (CORAL208). `coral_lang.formatting` relies on the rule
+    (after code: its own line; alone: the next line) to keep a file's findings."""
     allowed: dict[tuple[str, int], set[str]] = {}
     problems: list[Diagnostic] = []
     for file, text in sources.items():
@@ -418,8 +431,9 @@ def _apply_suppressions(
                     )
                 )
                 continue
-            for target in (number, number + 1):  # the line itself, or the one below
-                allowed.setdefault((file, target), set()).update(codes)
+            # after code: that line; alone on its line: the next one
+            target = number + 1 if not line[: match.start()].strip() else number
+            allowed.setdefault((file, target), set()).update(codes)
     kept = [
         d
         for d in findings

@@ -104,7 +104,6 @@ arrays count. The default `DEFAULT_MAX_PRODUCT_EDGES` = 20 million is thus about
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, cast, overload
@@ -114,6 +113,7 @@ import numpy.typing as npt
 import spot
 from spot import buddy
 
+from analysis.budget import Budget, work_limit_reason
 from analysis.ctl import NetIndex, StateEvaluator
 from analysis.fairness import Group
 from analysis.stategraph import (
@@ -210,6 +210,7 @@ def check_ltl(
     *,
     fairness: Sequence[Group] = (),
     max_product_edges: int | None = DEFAULT_MAX_PRODUCT_EDGES,
+    budget: Budget | None = None,
 ) -> LtlResult:
     """Whether every (weakly fair) run of ``graph`` from node 0 satisfies ``formula``.
 
@@ -224,13 +225,17 @@ def check_ltl(
             fair for all of them count.
         max_product_edges: refuse past this many reachable product edges (unless a
             counterexample turned up within them); ``None`` for no limit.
+        budget: its clock times the check (``LtlResult.seconds``); its deadline is
+            checked between the layers of a large product (None: no limit).
 
     Raises:
         NotLtlError: ``formula`` is not LTL.
         LtlError: it names a place or transition the net does not have.
-        ProductTooLarge: the budget ran out.
+        ProductTooLarge: the edge budget ran out.
+        BudgetExceeded: the deadline of ``budget`` passed.
     """
-    start = time.perf_counter()
+    budget = budget or Budget()
+    start = budget.clock()
     body = ltl_body(formula)
     if body is None:
         raise NotLtlError(f"not an LTL formula (a path quantifier below the root): {formula}")
@@ -270,7 +275,7 @@ def check_ltl(
             product.n_nodes if product else 0,
             int(product.src.size) if product else 0,
             n_aut,
-            time.perf_counter() - start,
+            budget.clock() - start,
         )
 
     if aut.is_empty():  # ¬φ has no model at all: φ is valid
@@ -288,7 +293,9 @@ def check_ltl(
     layers = DEEP_LAYERS if fits else None
     layered = None
     if full > EAGER_PRODUCT_EDGES:
-        layered = _layered_product(ext, automaton, table, inv, search, max_product_edges, layers)
+        layered = _layered_product(
+            ext, automaton, table, inv, search, max_product_edges, layers, budget
+        )
     if layered is not None:
         return result(*layered)
     product = _eager_product(ext, automaton, table, inv, full)
@@ -300,8 +307,8 @@ def check_ltl(
 
 def _too_large(edges: int, budget: int) -> ProductTooLarge:
     return ProductTooLarge(
-        f"the LTL product has more than {budget} reachable edges (the budget; "
-        f"{edges} built) and no counterexample among them"
+        f"LTL product {work_limit_reason(budget, 'edge')} ({edges:,} edges built) and no"
+        " counterexample among them"
     )
 
 
@@ -761,16 +768,18 @@ def _layered_product(
     table: BoolArray,
     inv: Index,
     search: _Search,
-    budget: int | None,
+    max_edges: int | None,
     max_layers: int | None,
+    budget: Budget,
 ) -> tuple[_Product, Lasso | None] | None:
     """The reachable product, breadth first from the initial node: each layer expands
     its nodes' graph edges times their automaton state's edges in array operations.
 
     Any fair accepting cycle of a part built so far is one of the whole product, so
     the part is searched from time to time (`FIRST_CHECK`) and a counterexample stops
-    the construction early; the budget stops only a search that found none. ``None``
-    after ``max_layers`` layers (nothing found)."""
+    the construction early; ``max_edges`` stops only a search that found none. ``None``
+    after ``max_layers`` layers (nothing found). Past the deadline of ``budget`` (checked
+    once a layer) it raises `BudgetExceeded`."""
     q = aut.n_states
     if ext.n_nodes * q >= 1 << 31:
         raise ProductTooLarge(f"{ext.n_nodes} markings times {q} automaton states: too many")
@@ -794,6 +803,7 @@ def _layered_product(
         layers += 1
         if max_layers is not None and layers > max_layers:
             return None
+        budget.check()
         fresh: list[IntArray] = []
         for chunk in _chunks(frontier, ext, aut, q):
             s, state = chunk // q, chunk % q
@@ -808,11 +818,11 @@ def _layered_product(
             nodes.append(new)
             fresh.append(new)
             edges.append(number[chunk[owner[owner2]]], number[dst], edge, a)
-            if budget is not None and edges.size > budget:
+            if max_edges is not None and edges.size > max_edges:
                 product = assemble()
                 lasso = search(product)
                 if lasso is None:
-                    raise _too_large(edges.size, budget)
+                    raise _too_large(edges.size, max_edges)
                 return product, lasso
         frontier = _concat(fresh)
         if edges.size >= check_at and frontier.size:

@@ -14,6 +14,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TextIO
 
+from analysis.budget import Clock
+
 
 @dataclass(frozen=True)
 class ProgressInfo:
@@ -65,7 +67,7 @@ class ProgressPrinter:
         stream: TextIO | None = None,
         interval: float = 0.5,
         force: bool = False,
-        clock: Callable[[], float] = time.perf_counter,
+        clock: Clock = time.perf_counter,
     ) -> None:
         self.stream = stream if stream is not None else sys.stderr
         self.interval = interval

@@ -30,19 +30,96 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from analysis.argtypes import positive_float, positive_int
+from analysis.cli_options import add_budget_options, add_output_options, output_conflict
 from analysis.outcome import EXIT_INCONCLUSIVE, EXIT_OK, EXIT_USAGE
+from coral_lang.cliframe import (
+    CommandParser,
+    command_parser,
+    positive_int,
+    print_error,
+    run_main,
+)
 
-__all__ = ["build_query_parser", "query_main"]
+__all__ = [
+    "QUERY_DESCRIPTION",
+    "QUERY_EXIT_CODES_HELP",
+    "add_query_parser",
+    "build_query_parser",
+    "configure_query",
+    "query_main",
+    "run_query",
+]
 
+PROG = "coral-check query"
+QUERY_DESCRIPTION = (
+    "Answer Model Checking Contest queries on a P/T net: the formulas of MCC property "
+    "files (Reachability, CTL, LTL, UpperBounds) and the global examinations. Prints one "
+    "'FORMULA <id> <answer> TECHNIQUES ...' line per formula (CANNOT_COMPUTE when a budget "
+    "ran out; answers are exact or absent)."
+)
 QUERY_EXIT_CODES_HELP = (
     "exit codes: 0 every formula answered, 3 some formula CANNOT_COMPUTE (a budget ran "
     "out), 2 bad usage or unreadable input."
 )
 
 
+def add_query_parser(
+    subparsers: argparse._SubParsersAction[argparse.ArgumentParser],
+) -> argparse.ArgumentParser:
+    """``coral-check query`` as a subcommand of coral-check's parser.
+
+    Its options are added the first time it parses or prints help: their choices and
+    defaults come from `analysis.examinations`, about a second to import, which a
+    ``coral-check lint`` run in a pre-commit hook must not pay."""
+    # argparse makes every subparser of the class `add_subparsers` was given; this one
+    # alone is lazy, so the class is switched for this call only.
+    default_class = subparsers._parser_class
+    subparsers._parser_class = _LazyQueryParser
+    try:
+        return subparsers.add_parser(
+            "query",
+            help="Model Checking Contest queries on a PNML net",
+            description=QUERY_DESCRIPTION,
+            epilog=QUERY_EXIT_CODES_HELP,
+        )
+    finally:
+        subparsers._parser_class = default_class
+
+
+class _LazyQueryParser(CommandParser):
+    """A parser that adds ``coral-check query``'s arguments when first used."""
+
+    _configured = False
+
+    def _configure(self) -> None:
+        if not self._configured:
+            self._configured = True
+            configure_query(self)
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        self._configure()
+        return super().parse_known_args(args, namespace)
+
+    def format_help(self) -> str:
+        self._configure()
+        return super().format_help()
+
+    def format_usage(self) -> str:
+        self._configure()
+        return super().format_usage()
+
+
 def build_query_parser() -> argparse.ArgumentParser:
-    """The parser for ``coral-check query``."""
+    """``coral-check query``'s parser on its own (`query_main`)."""
+    parser = command_parser(PROG, QUERY_DESCRIPTION, QUERY_EXIT_CODES_HELP)
+    configure_query(parser)
+    return parser
+
+
+def configure_query(parser: argparse.ArgumentParser) -> None:
+    """Add ``coral-check query``'s arguments to ``parser``."""
     from analysis.examinations import (
         DEFAULT_MAX_EDGES,
         DEFAULT_MAX_PRODUCT_EDGES,
@@ -50,14 +127,6 @@ def build_query_parser() -> argparse.ArgumentParser:
         EXAMINATIONS,
     )
 
-    parser = argparse.ArgumentParser(
-        prog="coral-check query",
-        description="Answer Model Checking Contest queries on a P/T net: the formulas of "
-        "MCC property files (Reachability, CTL, LTL, UpperBounds) and the global "
-        "examinations. Prints one 'FORMULA <id> <answer> TECHNIQUES ...' line per formula "
-        "(CANNOT_COMPUTE when a budget ran out; answers are exact or absent).",
-        epilog=QUERY_EXIT_CODES_HELP,
-    )
     parser.add_argument(
         "model", metavar="MODEL", help="PNML file, or an MCC folder holding model.pnml"
     )
@@ -72,43 +141,34 @@ def build_query_parser() -> argparse.ArgumentParser:
         metavar="NAME",
         help="an MCC examination (repeatable): " + ", ".join(EXAMINATIONS),
     )
-    parser.add_argument(
-        "--format", choices=("text", "json"), default="text", help="output (default text)"
+    add_output_options(
+        parser, ("text", "json"), format_help="output (default text)", color=False, quiet=False
     )
-    parser.add_argument("-o", "--output", metavar="OUT", help="write here, not to stdout")
-    parser.add_argument(
-        "--max-states",
-        type=positive_int,
-        default=DEFAULT_MAX_STATES,
-        metavar="N",
-        help=f"state budget of the search (default {DEFAULT_MAX_STATES})",
+    budgets = add_budget_options(
+        parser,
+        defaults={
+            "max_states": DEFAULT_MAX_STATES,
+            "time_limit": 600.0,
+            "max_edges": DEFAULT_MAX_EDGES,
+        },
+        helps={
+            "max_states": f"state budget of the search (default {DEFAULT_MAX_STATES})",
+            "time_limit": "time for the whole run (default 600)",
+            "max_edges": "edges of the reachability graph (CTL, LTL, Liveness; "
+            f"default {DEFAULT_MAX_EDGES})",
+        },
     )
-    parser.add_argument(
-        "--time-limit",
-        type=positive_float,
-        default=600.0,
-        metavar="SECONDS",
-        help="time for the whole run (default 600)",
-    )
-    parser.add_argument(
-        "--max-edges",
-        type=positive_int,
-        default=DEFAULT_MAX_EDGES,
-        metavar="N",
-        help=f"edges of the reachability graph (CTL, LTL, Liveness; default {DEFAULT_MAX_EDGES})",
-    )
-    parser.add_argument(
+    budgets.add_argument(
         "--max-product-edges",
         type=positive_int,
         default=DEFAULT_MAX_PRODUCT_EDGES,
         metavar="N",
         help=f"edges of one LTL product (default {DEFAULT_MAX_PRODUCT_EDGES})",
     )
-    return parser
 
 
 def _error(message: str) -> None:
-    print(f"coral-check query: error: {message}", file=sys.stderr)
+    print_error(PROG, message)
 
 
 class _BadInput(Exception):
@@ -138,17 +198,19 @@ def _examination_file(model: Path, name: str) -> Path:
     )
 
 
-def query_main(argv: Sequence[str]) -> int:
-    """Run ``coral-check query``; returns the exit code."""
-    try:
-        args = build_query_parser().parse_args(list(argv))
-    except SystemExit as exc:
-        return EXIT_OK if exc.code == 0 else EXIT_USAGE
+def query_main(argv: Sequence[str] | None = None) -> int:
+    """Run ``coral-check query`` on its own; returns the exit code (2 on bad usage)."""
+    return run_main(build_query_parser(), argv, run_query)
+
+
+def run_query(args: argparse.Namespace) -> int:
+    """Answer the parsed query command; the exit code."""
     if not args.queries and not args.examination:
         _error("nothing to do: give query files or --examination NAME")
         return EXIT_USAGE
-    if args.output and Path(args.output).is_dir():
-        _error(f"cannot write '{args.output}': it is a directory")
+    conflict = output_conflict([("-o", args.output)], [args.model, *args.queries])
+    if conflict is not None:
+        _error(conflict)
         return EXIT_USAGE
     try:
         document, lines, complete = _run(args)
@@ -168,7 +230,7 @@ def query_main(argv: Sequence[str]) -> int:
 
 
 def _run(args: argparse.Namespace) -> tuple[dict[str, Any], str, bool]:
-    from analysis.examinations import GLOBAL_EXAMINATIONS, Answer, Budget, QuerySession
+    from analysis.examinations import GLOBAL_EXAMINATIONS, Answer, QueryLimits, QuerySession
     from analysis.mccxml import MccProperty, MccXmlError, read_properties
     from coral_lang.diagnostics import PnmlError
     from coral_lang.pnml import read_pnml
@@ -195,13 +257,13 @@ def _run(args: argparse.Namespace) -> tuple[dict[str, Any], str, bool]:
             props.extend(read_properties(file, net))
         except MccXmlError as exc:
             raise _BadInput(str(exc)) from None
-    budget = Budget(
+    limits = QueryLimits(
         max_states=args.max_states,
         time_limit=args.time_limit,
         max_edges=args.max_edges,
         max_product_edges=args.max_product_edges,
     )
-    session = QuerySession(net, budget)
+    session = QuerySession(net, limits)
     answers: list[Answer] = session.check(props)
     answers += [session.check_global(name) for name in globals_]
     lines = "".join(a.mcc_line() + "\n" for a in answers)

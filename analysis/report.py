@@ -8,8 +8,12 @@ A verdict is one of three words and nothing else:
   sequence from the initial marking that anyone can replay);
 * ``inconclusive``: neither could be shown within the budgets; ``detail`` says why.
 
-The JSON form (`Report.to_dict`) is documented in ``docs/verify.md`` and is stable:
-keys are only ever added.
+The JSON form (`Report.to_dict`) is the ``report`` member of a file in coral-check's
+one JSON document (``docs/json.md``) and is stable: keys are only ever added.
+
+Every finding of a property that is not proven is located in the source
+(`located_findings`): the text report prints each as ``file:line:col: message``, as
+compilers and SARIF do, and every trace as numbered steps with their lines.
 """
 
 from __future__ import annotations
@@ -26,6 +30,11 @@ if TYPE_CHECKING:
     from analysis.statespace import StateSpace
 
 REPORT_FORMAT_VERSION = 1
+MAX_TRACE_STEPS = 50
+"""Steps of one trace a text or HTML report prints; the JSON document holds them all."""
+MAX_FINDINGS_SHOWN = 50
+"""Located findings of one property a text report prints (a net with hundreds of dead
+transitions would bury the rest); the JSON document lists them all."""
 
 
 class Verdict(enum.Enum):
@@ -184,6 +193,101 @@ class PropertyResult:
 
 
 @dataclass(frozen=True)
+class Finding:
+    """One thing a property found, where it is written: a dead transition, an
+    unbounded place, the transition that reaches a deadlock...
+
+    Attributes:
+        message: What is wrong there, e.g. ``transition 'surface' can never fire``.
+        span: Where in the source; None when the net has no position for it (a PNML
+            model, a deadlock in the initial marking).
+    """
+
+    message: str
+    span: Span | None = None
+
+    def render(self) -> str:
+        """``file:line:col: message``, as compilers and SARIF locate findings."""
+        return f"{self.span}: {self.message}" if self.span is not None else self.message
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON form."""
+        return {"message": self.message, "location": self.span.to_dict() if self.span else None}
+
+
+def _element_span(net: Net | None, name: str) -> Span | None:
+    if net is None:
+        return None
+    if name in net.place_names:
+        return net.place(name).span
+    try:
+        return net.transition(name).span
+    except KeyError:
+        return None
+
+
+def _last_span(evidence: Evidence) -> Span | None:
+    steps = [*evidence.trace, *evidence.loop]
+    return next((s.span for s in reversed(steps) if s.span is not None), None)
+
+
+def _reached(evidence: Evidence) -> str:
+    steps = len(evidence.trace)
+    marking = _format_marking(evidence.marking) if evidence.marking is not None else "it"
+    return f"{marking} reached here, after {steps} step{'' if steps == 1 else 's'}"
+
+
+def located_findings(prop: PropertyResult, net: Net | None) -> list[Finding]:
+    """The findings of a property that is not proven, each located in the source
+    (one per dead transition, unbounded place, dead marking...; none when proven).
+
+    The locations are SARIF's (`analysis.sarif`): the property's own text (an
+    assertion), else the net elements it names, else the last step of its trace.
+    Without the ``net`` the elements a property names have no location.
+    """
+    if prop.verdict is Verdict.PROVEN:
+        return []
+    sure = prop.verdict is Verdict.VIOLATED
+    key = prop.key.split(":", 1)[0]
+    found: list[Finding] = []
+    if key == "dead_transitions":
+        text = "can never fire" if sure else "was not seen firing (search incomplete)"
+        found = [Finding(f"transition '{n}' {text}", _element_span(net, n)) for n in prop.items]
+    elif key == "never_marked_places":
+        text = "never holds a token" if sure else "was not seen marked (search incomplete)"
+        found = [Finding(f"place '{n}' {text}", _element_span(net, n)) for n in prop.items]
+    elif key == "bounded":
+        text = "is unbounded" if sure else "may be unbounded"
+        found = [Finding(f"place '{n}' {text}", _element_span(net, n)) for n in prop.items]
+    elif key == "resource_conflicts" and prop.items:
+        for name in prop.items:
+            others = ", ".join(f"'{o}'" for o in prop.items if o != name) or "itself"
+            found.append(
+                Finding(
+                    f"command of transition '{name}' in flight together with {others}, "
+                    "on one vehicle resource",
+                    _element_span(net, name),
+                )
+            )
+    elif key == "deadlock":
+        for evidence in (prop.evidence, *prop.more_evidence):
+            if evidence is not None and evidence.marking is not None:
+                found.append(Finding(f"dead marking {_reached(evidence)}", _last_span(evidence)))
+    elif key == "final_reachable" and sure and net is not None:
+        found = [
+            Finding(f"final marking {_format_marking(dict(f.tokens))} is never reached", f.span)
+            for f in net.finals
+        ]
+    if found:
+        return found
+    span = prop.span
+    if span is None and prop.evidence is not None:
+        span = _last_span(prop.evidence)
+    word = prop.verdict.value if prop.required else f"{prop.verdict.value}, not required"
+    return [Finding(f"{word}: {prop.title}", span)]
+
+
+@dataclass(frozen=True)
 class StateSpaceFigures:
     """Size of the explored state space (of the reduced graph when ``reduced``)."""
 
@@ -247,10 +351,19 @@ class Report:
         """0 all proven, 1 some violated, 3 some inconclusive (and none violated)."""
         return {Verdict.PROVEN: 0, Verdict.VIOLATED: 1, Verdict.INCONCLUSIVE: 3}[self.verdict]
 
-    def to_dict(self) -> dict[str, object]:
-        """The stable JSON form (see ``docs/verify.md``)."""
+    def to_dict(self, net: Net | None = None) -> dict[str, object]:
+        """The stable JSON form (see ``docs/json.md``).
+
+        Each property lists its ``findings`` (`located_findings`), located in the
+        source when the ``net`` the report is about is given.
+        """
         deadlock = self.property("deadlock")
         bounded = self.property("bounded")
+        properties = []
+        for prop in self.properties:
+            entry = prop.to_dict()
+            entry["findings"] = [f.to_dict() for f in located_findings(prop, net)]
+            properties.append(entry)
         return {
             "format": REPORT_FORMAT_VERSION,
             "net": {"name": self.net_name, "digest": self.digest, "sources": list(self.sources)},
@@ -269,13 +382,22 @@ class Report:
                 "method": bounded.method,
                 "unbounded_places": list(bounded.items),
             },
-            "properties": [p.to_dict() for p in self.properties],
+            "properties": properties,
             "structure": self.structure,
             "seconds": round(self.seconds, 6),
         }
 
-    def render_text(self, color: bool = False) -> str:
-        """A report for a terminal; ``color`` adds ANSI colours to the verdicts."""
+    def render_text(
+        self, color: bool = False, net: Net | None = None, max_steps: int = MAX_TRACE_STEPS
+    ) -> str:
+        """A report for a terminal; ``color`` adds ANSI colours to the verdicts.
+
+        With the ``net`` the report is about, every finding of a property that is not
+        proven gets a line of its own located in the source, ``file:line:col: message``
+        (as compilers and SARIF locate them). Each counterexample, and the witness of a
+        proven reachability property, is printed as numbered steps, the first
+        ``max_steps`` of them (the JSON document holds them all).
+        """
         paint = _Paint(color)
         space = self.statespace
         lines = [
@@ -296,13 +418,18 @@ class Report:
                 )
             if result.detail:
                 lines.append(f"      {result.detail}")
+            if net is not None:
+                lines.extend(_render_findings(located_findings(result, net)))
             if result.evidence and result.verdict is not Verdict.PROVEN:
-                lines.extend(_render_evidence(result.evidence))
+                lines.extend(_render_evidence(result.evidence, max_steps))
                 for number, more in enumerate(result.more_evidence, start=2):
                     lines.append(f"      counterexample {number}:")
-                    lines.extend(_render_evidence(more))
+                    lines.extend(_render_evidence(more, max_steps))
                 if result.omitted:
                     lines.append(f"      ... and {result.omitted} more not listed")
+            elif result.evidence and (result.evidence.trace or result.evidence.loop):
+                lines.append("      witness:")
+                lines.extend(_render_evidence(result.evidence, max_steps))
         counts = {
             v: sum(1 for p in self.properties if p.verdict is v and not p.warning) for v in Verdict
         }
@@ -315,12 +442,31 @@ class Report:
         return "\n".join(lines)
 
 
-def _render_evidence(evidence: Evidence) -> list[str]:
-    """A trace (then its loop, for an infinite run), the marking, the note."""
-    lines = ["      " + step.render() for step in evidence.trace]
-    if evidence.loop:
+def _render_findings(findings: list[Finding]) -> list[str]:
+    """The located findings, one ``file:line:col: message`` line each, at most
+    `MAX_FINDINGS_SHOWN`, then how many more (the JSON document lists them all)."""
+    located = [f.render() for f in findings if f.span is not None]
+    hidden = len(located) - MAX_FINDINGS_SHOWN
+    if hidden > 0:
+        located = located[:MAX_FINDINGS_SHOWN]
+        located.append(f"      ... {hidden} more located (all in --format json)")
+    return located
+
+
+def _render_evidence(evidence: Evidence, max_steps: int = MAX_TRACE_STEPS) -> list[str]:
+    """A trace (then its loop, for an infinite run), the marking, the note; at most
+    ``max_steps`` steps, then how many more there are."""
+    lines = ["      " + step.render() for step in evidence.trace[:max_steps]]
+    room = max(0, max_steps - len(evidence.trace))
+    if evidence.loop and room:
         lines.append("      then repeat forever:" if evidence.marking else "      then repeat:")
-        lines.extend("      " + step.render() for step in evidence.loop)
+        lines.extend("      " + step.render() for step in evidence.loop[:room])
+    hidden = len(evidence.trace) + len(evidence.loop) - max_steps
+    if hidden > 0:
+        lines.append(
+            f"      ... {hidden} more step{'' if hidden == 1 else 's'} "
+            "(full trace in --format json)"
+        )
     if evidence.marking is not None:
         where = "back at" if evidence.loop else "reaching"
         lines.append(f"      {where} {_format_marking(evidence.marking)}")

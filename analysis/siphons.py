@@ -14,14 +14,12 @@ places hold tokens (too few). `siphon_trap_check` says which case applies.
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass
 
+from analysis.budget import Budget, stage, work_limit_reason
 from analysis.structural import classify
 from coral_lang.net import Net
-
-Clock = Callable[[], float]
 
 DEFAULT_MAX_BRANCHES = 100_000
 DEFAULT_TIME_LIMIT = 10.0
@@ -133,8 +131,7 @@ class SiphonEnumeration:
 def minimal_siphons(
     net: Net,
     max_branches: int = DEFAULT_MAX_BRANCHES,
-    time_limit: float | None = DEFAULT_TIME_LIMIT,
-    clock: Clock = time.monotonic,
+    budget: Budget | None = None,
 ) -> SiphonEnumeration:
     """Enumerate the minimal siphons of ``net``.
 
@@ -148,14 +145,13 @@ def minimal_siphons(
     Args:
         net: The net.
         max_branches: Stop after exploring this many partial sets.
-        time_limit: Seconds; None for no limit.
-        clock: Monotonic clock.
+        budget: Bounds the time (default: `DEFAULT_TIME_LIMIT` seconds from now).
 
     Returns:
         A `SiphonEnumeration`; ``complete`` says whether the list is exhaustive.
     """
     arcs = _Arcs(net)
-    deadline = None if time_limit is None else clock() + time_limit
+    budget = stage(budget, DEFAULT_TIME_LIMIT)
     found: set[frozenset[int]] = set()
     seen: set[frozenset[int]] = set()
     branches = 0
@@ -173,10 +169,10 @@ def minimal_siphons(
             seen.add(current)
             branches += 1
             if branches > max_branches:
-                complete, reason = False, f"more than {max_branches} partial sets"
+                complete, reason = False, work_limit_reason(max_branches, "partial set")
                 break
-            if deadline is not None and branches % 256 == 0 and clock() > deadline:
-                complete, reason = False, f"time limit of {time_limit} s"
+            if branches % 256 == 0 and budget.expired():
+                complete, reason = False, budget.time_reason(branches, "partial set")
                 break
             choices = _branching(arcs, current, allowed)
             if choices is None:
@@ -267,21 +263,19 @@ class SiphonTrapCheck:
 def siphon_trap_check(
     net: Net,
     max_branches: int = DEFAULT_MAX_BRANCHES,
-    time_limit: float | None = DEFAULT_TIME_LIMIT,
-    clock: Clock = time.monotonic,
+    budget: Budget | None = None,
 ) -> SiphonTrapCheck:
     """Check the siphon-trap property and state honestly what it proves.
 
     Args:
         net: The net.
         max_branches: Work bound for the siphon enumeration.
-        time_limit: Seconds for the enumeration.
-        clock: Monotonic clock.
+        budget: Bounds the time of the enumeration (see `minimal_siphons`).
 
     Returns:
         A `SiphonTrapCheck`.
     """
-    enumeration = minimal_siphons(net, max_branches, time_limit, clock)
+    enumeration = minimal_siphons(net, max_branches, budget)
     arcs = _Arcs(net)
     m0 = net.initial_marking()
     failing: tuple[str, ...] | None = None

@@ -22,25 +22,26 @@ constraints, optionally "dead" (no transition enabled), optionally minus some ma
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar, Literal
 
+from analysis.budget import Budget, stage
 from analysis.inputs import legal_trace
 from analysis.invariants import InvariantBasis
 from analysis.siphons import maximal_trap
-from analysis.structural import DEFAULT_TIMEOUT_MS, TooLargeForStructure, incidence
+from analysis.structural import DEFAULT_QUERY_SECONDS, TooLargeForStructure, incidence
 from coral_lang.net import Net, Transition, TransitionKind
 
 if TYPE_CHECKING:
     import z3  # imported where a query runs: it takes about 50 ms to load
 
 Marking = tuple[int, ...]
-Clock = Callable[[], float]
 Op = Literal[">=", "<=", "=="]
 
 METHOD = "state equation"
+DEFAULT_TIME_LIMIT = 60.0
+"""Default time limit of `check_unreachable`, across its trap refinement rounds."""
 METHOD_TRAPS = "state equation + traps"
 
 
@@ -275,9 +276,8 @@ def check_unreachable(
     invariants: InvariantBasis | None = None,
     use_traps: bool = True,
     max_trap_rounds: int = 50,
-    timeout_ms: int = DEFAULT_TIMEOUT_MS,
-    time_limit: float | None = 60.0,
-    clock: Clock = time.monotonic,
+    query_seconds: float = DEFAULT_QUERY_SECONDS,
+    budget: Budget | None = None,
 ) -> StateEquationResult:
     """Try to prove that no marking in ``bad`` is reachable.
 
@@ -287,9 +287,9 @@ def check_unreachable(
         invariants: P-invariants to add as y·M = y·M0 (optional; implied anyway).
         use_traps: Refine candidates with trap constraints.
         max_trap_rounds: At most this many refinement rounds.
-        timeout_ms: z3 time limit per query.
-        time_limit: Overall seconds across rounds; None for no limit.
-        clock: Monotonic clock for ``time_limit``.
+        query_seconds: Cap of each z3 query (also bounded by ``budget``).
+        budget: Bounds all rounds together (default: `DEFAULT_TIME_LIMIT` seconds from
+            now); a candidate found when it runs out is returned unrefined.
 
     Returns:
         `Proven` (unsat: no bad marking is reachable), `Candidate` (a solution that
@@ -300,14 +300,15 @@ def check_unreachable(
 
     if invariants is not None and invariants.kind != "P":
         raise ValueError("the state equation is strengthened with P-invariants only")
-    start = clock()
+    budget = stage(budget, DEFAULT_TIME_LIMIT)
     try:
-        solver, marking, counts = _equation(net, bad, invariants, timeout_ms)
+        solver, marking, counts = _equation(net, bad, invariants)
     except TooLargeForStructure as exc:
         return Unknown(bad=bad, reason=str(exc), method=METHOD)
     traps: list[tuple[str, ...]] = []
     rounds = 0
     while True:
+        solver.set("timeout", budget.z3_timeout_ms(query_seconds))
         status = solver.check()
         method = METHOD_TRAPS if traps else METHOD
         if status == z3.unsat:
@@ -318,8 +319,7 @@ def check_unreachable(
         m = tuple(model.eval(v, model_completion=True).as_long() for v in marking)
         x = tuple(model.eval(v, model_completion=True).as_long() for v in counts)
         trap = _violated_trap(net, m) if use_traps else None
-        over_time = time_limit is not None and clock() - start > time_limit
-        if trap is None or rounds >= max_trap_rounds or over_time:
+        if trap is None or rounds >= max_trap_rounds or budget.expired():
             return Candidate(
                 bad=bad,
                 marking=m,
@@ -375,7 +375,7 @@ def realise(net: Net, candidate: Candidate, max_nodes: int = 100_000) -> tuple[i
 
 
 def _equation(
-    net: Net, bad: BadMarkings, invariants: InvariantBasis | None, timeout_ms: int
+    net: Net, bad: BadMarkings, invariants: InvariantBasis | None
 ) -> tuple[z3.Solver, list[z3.ArithRef], list[z3.ArithRef]]:
     """The solver with M = M0 + C x, x >= 0, M >= 0, invariants and the bad set."""
     import z3
@@ -385,7 +385,6 @@ def _equation(
     counts = [z3.Int(f"x_{t}") for t in range(len(net.transitions))]
     marking = [z3.Int(f"m_{p}") for p in range(len(net.places))]
     solver = z3.Solver()
-    solver.set("timeout", timeout_ms)
     solver.add(*[x >= 0 for x in counts], *[m >= 0 for m in marking])
     for p, row in enumerate(rows):
         flow = [c * counts[t] for t, c in enumerate(row) if c]

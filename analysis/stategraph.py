@@ -28,7 +28,6 @@ and every ``coral-check`` of a mission pays it otherwise. scipy is loaded on fir
 
 from __future__ import annotations
 
-import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -38,13 +37,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from analysis.budget import Budget, work_limit_reason
 from analysis.encoding import KeyStore
 from analysis.inputs import input_flags
 from analysis.statespace import StateSpace
 
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
-Clock = Callable[[], float]
 
 if TYPE_CHECKING:
     import scipy.sparse as sp
@@ -126,16 +125,15 @@ def build_graph(
     space: StateSpace,
     *,
     max_edges: int | None = None,
-    time_limit: float | None = None,
-    clock: Clock = time.perf_counter,
+    budget: Budget | None = None,
 ) -> StateGraph:
     """The edges of a complete, unreduced ``space``.
 
     Args:
         space: from `explore` with ``por=False``, ``complete``.
         max_edges: stop with `GraphError` past this many edges (12 bytes each).
-        time_limit: stop with `GraphError` after this many seconds.
-        clock: seconds counter; tests pass a fake one.
+        budget: its deadline stops the build with `GraphError` (None: no limit); its
+            clock times it.
 
     Raises:
         GraphError: the space is incomplete or reduced, or a budget ran out.
@@ -145,8 +143,9 @@ def build_graph(
     if not space.complete:
         raise GraphError(f"the state space is incomplete ({space.stopped_reason})")
     if max_edges is not None and space.edges > max_edges:
-        raise GraphError(f"{space.edges} edges exceed the budget of {max_edges}")
-    start = clock()
+        raise GraphError(_too_many_edges(space.edges, max_edges))
+    budget = budget or Budget()
+    start = budget.clock()
     from analysis.encoding import CompactNet
 
     cn = CompactNet.from_net(space.net)
@@ -162,8 +161,9 @@ def build_graph(
     targets: list[IntArray] = []
     labels: list[IntArray] = []
     for first, block in space.iter_markings(chunk):
-        if time_limit is not None and clock() - start > time_limit:
-            raise GraphError(f"building the edges took more than {time_limit:g} s")
+        if budget.expired():
+            done = sum(int(t.size) for t in targets)
+            raise GraphError(f"building the edges: {budget.time_reason(done, 'edge')}")
         enabled = np.zeros((block.shape[0], n_t), dtype=np.bool_)
         for group in cn.groups:
             if group.places.shape[1] == 0:
@@ -190,8 +190,12 @@ def build_graph(
     all_targets = np.concatenate(targets) if targets else np.zeros(0, dtype=np.int64)
     all_labels = np.concatenate(labels) if labels else np.zeros(0, dtype=np.int64)
     if max_edges is not None and all_targets.size > max_edges:
-        raise GraphError(f"{all_targets.size} edges exceed the budget of {max_edges}")
-    return StateGraph(space, indptr, all_targets, all_labels, clock() - start)
+        raise GraphError(_too_many_edges(all_targets.size, max_edges))
+    return StateGraph(space, indptr, all_targets, all_labels, budget.clock() - start)
+
+
+def _too_many_edges(edges: int, max_edges: int) -> str:
+    return f"{work_limit_reason(max_edges, 'edge')}: the graph has {edges:,} edges"
 
 
 # -- algorithms on arrays of edges --------------------------------------------------------

@@ -46,13 +46,13 @@ Typical use::
 from __future__ import annotations
 
 import contextlib
-import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
 
+from analysis.budget import Budget, BudgetExceeded, work_limit_reason
 from analysis.encoding import (
     MAX_FIELD_BITS,
     NEVER,
@@ -95,7 +95,6 @@ StopWhen = Callable[[int, Markings], bool]
 
 STOPPED_BY_REQUEST = "stopped: stop_when asked to"
 """``stopped_reason`` when `explore`'s ``stop_when`` ended the search."""
-Clock = Callable[[], float]
 
 
 @dataclass
@@ -402,10 +401,6 @@ class SleepSets:
         return out
 
 
-class _Stop(Exception):
-    """Raised inside the loop to end exploration early with a reason."""
-
-
 class _Round:
     """The levels of one narrow round (see `_Explorer.speculate`): per level, the
     candidates' columns and keys, the edge (source in the level above, transition) that
@@ -595,26 +590,24 @@ class _Explorer:
         self,
         cn: CompactNet,
         max_states: int | None,
-        time_limit: float | None,
+        budget: Budget,
         reducer: StubbornSets | None,
         progress: ProgressCallback | None,
         chunk: int,
-        clock: Clock,
         sleep_sets: bool = True,
     ) -> None:
         self.cn = cn
         self.max_states = max_states
-        self.time_limit = time_limit
+        self.budget = budget
         self.reducer = reducer
         self.progress = progress
         self.chunk = chunk
-        self.clock = clock
         self.stop_when: StopWhen | None = None
-        self.start = clock()
+        self.start = budget.clock()
         small = max_states is not None and max_states < np.iinfo(np.int32).max // 2
         self.index_type = np.int32 if small else np.int64
         self.via_type = np.int16 if cn.n_transitions < np.iinfo(np.int16).max else np.int32
-        layout = Layout.initial_guess(cn, one_hot_components(cn))
+        layout = Layout.initial_guess(cn, one_hot_components(cn, budget))
         self.fnet = fnet = FieldNet(cn, layout)
         self.index = _EnablingIndex(fnet, layout, cn.n_transitions)
         inc_t, inc_col = np.nonzero(fnet.inc_fields >= 0)
@@ -870,7 +863,7 @@ class _Explorer:
                 f"token count of place '{name}' would pass 2**{MAX_FIELD_BITS}, past what the"
                 " explorer counts exactly (the net may be unbounded)"
             )
-            raise _Stop
+            raise BudgetExceeded(self.stopped)
         packed = self.layout.repack(self.store.keys, layout)
         self._set_layout(layout)
         self.store.rekey(packed)
@@ -917,7 +910,7 @@ class _Explorer:
             return
         if self.stop_when(start, self.fnet.places(new, self.layout).T):
             self.stopped = STOPPED_BY_REQUEST
-            raise _Stop
+            raise BudgetExceeded(self.stopped)
 
     def record(self, new: npt.NDArray[np.integer]) -> None:
         """Update the bounds and the largest marking with new field columns."""
@@ -963,7 +956,7 @@ class _Explorer:
             self.record(new)
             self.offer(new, added.start)
         if added.cut:
-            self.stopped = f"state budget reached (max_states={self.max_states})"
+            self.stopped = work_limit_reason(self.max_states or 0, "state")
         return added
 
     def fired_edges(self, edges: Edges, sleep: npt.NDArray[np.uint64] | None, width: int) -> Edges:
@@ -1075,7 +1068,7 @@ class _Explorer:
         too_large = _beyond_exact_arithmetic(self.cn.net)
         if too_large is not None:
             self.stopped = too_large
-            raise _Stop
+            raise BudgetExceeded(too_large)
         # A layer is a list of column blocks (as produced, never joined into one array:
         # the widest layers are the largest temporaries) with their sleep sets.
         layer: list[npt.NDArray[np.integer]] = [self.fnet.initial[:, None].astype(self.dtype)]
@@ -1102,7 +1095,7 @@ class _Explorer:
                     part = None if sleep is None else sleep[c : c + size]
                     cols = self.step(cols, part, base + done + c, out)
                     if self.stopped:
-                        raise _Stop
+                        raise BudgetExceeded(self.stopped)
                     c += cols.shape[1]
                     self.check_time(width - done - c, out)
                 done += block.shape[1]
@@ -1187,8 +1180,8 @@ class _Explorer:
             if cut[j] > (cut[j - 1] if j else 0):
                 self.layer_starts.append(start + (int(cut[j - 1]) if j else 0))
         if added.cut:
-            self.stopped = f"state budget reached (max_states={self.max_states})"
-            raise _Stop
+            self.stopped = work_limit_reason(self.max_states or 0, "state")
+            raise BudgetExceeded(self.stopped)
         frontier = new[:, expanded:]
         self.check_time(frontier.shape[1], [])
         return frontier, start + expanded
@@ -1212,15 +1205,16 @@ class _Explorer:
         return max(min(256, self.chunk), min(self.chunk, by_edges, by_matrix))
 
     def check_time(self, left: int, out: list[npt.NDArray[np.integer]]) -> None:
-        now = self.clock() - self.start
+        """Report progress, and stop (with the budget's reason) past its deadline."""
         if self.progress is not None:
+            now = self.budget.clock() - self.start
             queued = left + sum(block.shape[1] for block in out)
             self.progress(
                 ProgressInfo(self.store.size, self.edges, queued, len(self.layer_starts), now)
             )
-        if self.time_limit is not None and now > self.time_limit:
-            self.stopped = f"time limit reached ({self.time_limit:g} s)"
-            raise _Stop
+        if self.budget.expired():
+            self.stopped = self.budget.time_reason(self.store.size, "state")
+            raise BudgetExceeded(self.stopped)
 
 
 def _unsigned(dtype: np.dtype[np.integer]) -> np.dtype[np.unsignedinteger]:
@@ -1348,12 +1342,11 @@ def explore(
     net: Net | CompactNet,
     *,
     max_states: int | None = DEFAULT_MAX_STATES,
-    time_limit: float | None = None,
+    budget: Budget | None = None,
     por: bool = False,
     visible: Sequence[str] | None = None,
     progress: ProgressCallback | None = None,
     chunk: int = DEFAULT_CHUNK,
-    clock: Clock = time.perf_counter,
     stop_when: StopWhen | None = None,
 ) -> StateSpace:
     """Explore the reachable markings of ``net`` breadth first.
@@ -1362,7 +1355,9 @@ def explore(
         net: the net, or its `CompactNet` when exploring one net several times.
         max_states: stop after storing this many markings (``None``: no limit; an
             unbounded net then runs until its token counts pass ``2**60``).
-        time_limit: stop after this many seconds (checked after every chunk).
+        budget: its clock times the search and its deadline stops it (checked after
+            every chunk; ``None``: no time limit, on the real clock); its work cap, if
+            any, is a state cap too (the smaller of it and ``max_states`` applies).
         por: explore a stubborn-set reduced graph instead (`analysis.stubborn`): all
             deadlocks are kept; ``states``/``edges`` then count the reduced graph.
         visible: with ``por``, places a reachability question is about; the reduced
@@ -1372,8 +1367,7 @@ def explore(
         progress: called after every chunk with a `ProgressInfo`
             (see `analysis.progress.ProgressPrinter`).
         chunk: frontier rows per vectorised step (and most candidates of a narrow
-            round), i.e. the work between two `time_limit`/`progress` checks.
-        clock: seconds counter; tests pass a fake one.
+            round), i.e. the work between two deadline/`progress` checks.
         stop_when: called as ``stop_when(first, markings)`` with every batch of newly
             stored states, numbered ``first, first + 1, ...`` (BFS order), their
             markings as rows ``(n, places)``; returning true ends the search there
@@ -1391,25 +1385,26 @@ def explore(
     the run never starts: the space is that one marking.
     """
     cn = net if isinstance(net, CompactNet) else CompactNet.from_net(net)
+    budget = budget or Budget()
+    if budget.work is not None:
+        max_states = budget.work if max_states is None else min(max_states, budget.work)
     if has_inputs(cn.net):
         return _explore_with_inputs(
             cn,
             max_states=max_states,
-            time_limit=time_limit,
+            budget=budget,
             progress=progress,
             chunk=chunk,
-            clock=clock,
             stop_when=stop_when,
         )
     return _explore(
         cn,
         max_states=max_states,
-        time_limit=time_limit,
+        budget=budget,
         por=por,
         visible=visible,
         progress=progress,
         chunk=chunk,
-        clock=clock,
         stop_when=stop_when,
     )
 
@@ -1418,10 +1413,9 @@ def _explore_with_inputs(
     cn: CompactNet,
     *,
     max_states: int | None,
-    time_limit: float | None,
+    budget: Budget,
     progress: ProgressCallback | None,
     chunk: int,
-    clock: Clock,
     stop_when: StopWhen | None,
 ) -> StateSpace:
     """`explore` for a net with operator inputs: unreduced P/T search, then the dead
@@ -1430,7 +1424,7 @@ def _explore_with_inputs(
     initial = net.initial_marking()
     if not net.runs_on(initial):
         # Only the initial marking is reachable: stop the search at its first successor.
-        space = _explore(cn, max_states=1, time_limit=time_limit, clock=clock, sleep_sets=False)
+        space = _explore(cn, max_states=1, budget=budget, sleep_sets=False)
         return replace(
             space,
             states=1,
@@ -1451,10 +1445,9 @@ def _explore_with_inputs(
     space = _explore(
         cn,
         max_states=max_states,
-        time_limit=time_limit,
+        budget=budget,
         progress=progress,
         chunk=chunk,
-        clock=clock,
         stop_when=stop_when,
         sleep_sets=False,
     )
@@ -1475,12 +1468,11 @@ def _explore(
     cn: CompactNet,
     *,
     max_states: int | None = DEFAULT_MAX_STATES,
-    time_limit: float | None = None,
+    budget: Budget,
     por: bool = False,
     visible: Sequence[str] | None = None,
     progress: ProgressCallback | None = None,
     chunk: int = DEFAULT_CHUNK,
-    clock: Clock = time.perf_counter,
     stop_when: StopWhen | None = None,
     sleep_sets: bool = True,
 ) -> StateSpace:
@@ -1490,13 +1482,11 @@ def _explore(
         vis = None if visible is None else [cn.net.place_index(p) for p in visible]
         reducer = StubbornSets(cn, vis)
     _settle_allocator()
-    explorer = _Explorer(
-        cn, max_states, time_limit, reducer, progress, chunk, clock, sleep_sets=sleep_sets
-    )
+    explorer = _Explorer(cn, max_states, budget, reducer, progress, chunk, sleep_sets=sleep_sets)
     explorer.stop_when = stop_when
-    with contextlib.suppress(_Stop):  # a budget ran out; the reason is recorded
+    with contextlib.suppress(BudgetExceeded):  # a budget ran out; the reason is recorded
         explorer.run()
-    seconds = clock() - explorer.start
+    seconds = budget.clock() - explorer.start
     store = explorer.store
     parents = explorer.parents.view[: store.size]
     via = explorer.via.view[: store.size]

@@ -16,8 +16,6 @@ into verdicts with evidence (see ``docs/analysis-methods.md``).
 from __future__ import annotations
 
 import math
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import TYPE_CHECKING
@@ -25,6 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from analysis.budget import Budget, stage
 from coral_lang.net import Net
 
 if TYPE_CHECKING:
@@ -32,7 +31,10 @@ if TYPE_CHECKING:
 
 IntMatrix = npt.NDArray[np.int64]
 
-DEFAULT_TIMEOUT_MS = 10_000
+DEFAULT_QUERY_SECONDS = 10.0
+"""Cap of one z3 query, in seconds (`analysis.budget.Budget.z3_timeout_ms` converts)."""
+PER_PLACE_SECONDS = 30.0
+"""Default time limit of `structural_boundedness` (the per-place LPs take most of it)."""
 MAX_DENSE_CELLS = 25_000_000
 """Places x transitions `incidence` builds: three int64 matrices of this many cells
 take 600 MB. ``analysis.verify`` stops at the same size before calling anything here;
@@ -288,10 +290,9 @@ def _to_fraction(value: z3.ExprRef) -> Fraction:
 
 def structural_boundedness(
     net: Net,
-    timeout_ms: int = DEFAULT_TIMEOUT_MS,
+    query_seconds: float = DEFAULT_QUERY_SECONDS,
     per_place: bool = True,
-    time_limit: float | None = 30.0,
-    clock: Callable[[], float] = time.monotonic,
+    budget: Budget | None = None,
 ) -> StructuralBoundedness:
     """Decide structural boundedness and derive per-place bounds by linear programming.
 
@@ -302,19 +303,19 @@ def structural_boundedness(
 
     Args:
         net: The net.
-        timeout_ms: z3 time limit per query.
+        query_seconds: Cap of each z3 query (also bounded by ``budget``).
         per_place: Also solve one small LP per place for the tightest bound (about 0.1 s
             per place on nets of a few hundred places). Without it bounds come from the
             single global weighting only.
-        time_limit: Seconds for all per-place LPs together; places left when it runs out
-            keep the global bound (or none). None for no limit.
-        clock: Monotonic clock for ``time_limit``.
+        budget: Bounds the whole computation (default: `PER_PLACE_SECONDS` from now);
+            places left when it runs out keep the global bound (or none).
 
     Returns:
         A `StructuralBoundedness`; ``structurally_bounded`` is None on timeout.
     """
     import z3
 
+    budget = stage(budget, PER_PLACE_SECONDS)
     effects = _effects(net)
     names = net.place_names
     m0 = net.initial_marking()
@@ -328,7 +329,7 @@ def structural_boundedness(
         ]
 
     solver = z3.Solver()
-    solver.set("timeout", timeout_ms)
+    solver.set("timeout", budget.z3_timeout_ms(query_seconds))
     solver.add(*[v >= 1 for v in y], *column_constraints())
     status = solver.check()
     weights: dict[str, Fraction] | None = None
@@ -352,11 +353,11 @@ def structural_boundedness(
         for name in names:
             bounds[name] = math.floor(total / weights[name])
     if per_place:
-        deadline = None if time_limit is None else clock() + time_limit
         for i, name in enumerate(names):
-            if deadline is not None and clock() > deadline:
-                reasons.append(f"per-place bounds stopped at the time limit of {time_limit} s")
+            if budget.expired():
+                reasons.append(f"per-place bounds stopped: {budget.time_reason(i, 'place')}")
                 break
+            timeout_ms = budget.z3_timeout_ms(query_seconds)
             best = _place_bound(y, i, m0, column_constraints(), timeout_ms)
             if isinstance(best, str):
                 reasons.append(f"{name}: {best}")
@@ -400,7 +401,7 @@ def _place_bound(
 
 
 __all__ = [
-    "DEFAULT_TIMEOUT_MS",
+    "DEFAULT_QUERY_SECONDS",
     "MAX_DENSE_CELLS",
     "Incidence",
     "NetClass",

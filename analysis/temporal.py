@@ -200,7 +200,7 @@ class _Temporal:
 
     def ctl(self, formula: fm.Formula) -> PropertyResult:
         """A CTL formula at the initial marking, over all maximal paths."""
-        from analysis.ctl import CtlChecker, CtlError, CtlTimeout
+        from analysis.ctl import CtlChecker, CtlError
 
         try:
             graph = self.graph()
@@ -209,12 +209,10 @@ class _Temporal:
             evidence = _Explainer(self.net, graph, checker).explain(formula, holds)
         except GraphError as exc:
             return self.inconclusive(CTL_METHOD, str(exc))
-        except (CtlError, CtlTimeout) as exc:
+        except CtlError as exc:
             return self.inconclusive(CTL_METHOD, f"cannot be checked: {exc}")
         if holds:
             detail = f"the initial marking satisfies it ({graph.n_states} markings)"
-            if evidence is not None:
-                detail += "; witness trace in the JSON report"
             return self.result(Verdict.PROVEN, CTL_METHOD, detail, evidence)
         detail = f"the initial marking does not satisfy it ({graph.n_states} markings)"
         if evidence is not None:

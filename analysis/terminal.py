@@ -21,6 +21,7 @@ _SEVERITY_COLOURS = {Severity.ERROR: "1;31", Severity.WARNING: "1;33", Severity.
 _STATUS_COLOURS = {
     "proven": "32",
     "clean": "32",
+    "part": "32",
     "violated": "31",
     "errors": "31",
     "unreadable": "31",
@@ -78,6 +79,12 @@ def summary_line(outcome: FileOutcome, lint_only: bool, color: bool = False) -> 
         tail = "" if lint_only else "; not verified"
         return f"{outcome.path}: {_paint(_count(errors, 'error'), '31', color)}{tail}"
     assert outcome.net is not None
+    if status == "part":
+        warned = f", {_count(warnings, 'warning')}" if warnings else ""
+        return (
+            f"{outcome.path}: {_paint('ok', '32', color)} as a part of {outcome.part_of}"
+            f"{warned} (compiled and linted with it; verified when it is checked)"
+        )
     if lint_only:
         warned = f", {_count(warnings, 'warning')}" if warnings else ""
         return (
@@ -105,12 +112,20 @@ def render_outcome(
     is not proven.
     """
     parts = [render_diagnostic(d, outcome.sources, color) for d in outcome.diagnostics]
-    report = outcome.report
-    if report is not None and not (quiet and outcome.status() == "proven"):
-        parts.append(report.render_text(color=color))
+    report = render_report(outcome, color)
+    if report and not (quiet and outcome.status() == "proven"):
+        parts.append(report)
     if not quiet:
         parts.append(summary_line(outcome, lint_only, color))
     return "\n\n".join(parts)
+
+
+def render_report(outcome: FileOutcome, color: bool = False) -> str:
+    """The verification report of a file (empty when it was not verified): verdicts,
+    each finding located as ``file:line:col: message``, every trace step by step."""
+    if outcome.report is None:
+        return ""
+    return outcome.report.render_text(color=color, net=outcome.net)
 
 
 def render_footer(outcomes: Sequence[FileOutcome], quiet: bool = False) -> str:

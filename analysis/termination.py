@@ -44,6 +44,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from analysis.budget import Budget
 from analysis.report import Evidence, PropertyResult, Verdict, make_trace, witness
 from analysis.statespace import StateSpace, explore
 from coral_lang.net import Net, TransitionKind, format_tokens
@@ -208,14 +209,15 @@ def final_states(space: StateSpace) -> BoolArray:
 
 
 @dataclass(frozen=True)
-class TerminationBudget:
+class TerminationLimits:
     """What `check_termination` may spend.
 
     Attributes:
         max_edges: Edge budget of the reachability graph (None: no limit).
         max_states: State budget of the unreduced exploration made when the given
             state space is partial-order reduced.
-        time_limit: Seconds for that exploration and for building the edges.
+        time_limit: Seconds for that exploration and, separately, for building the edges
+            (each a slice of the caller's `Budget`).
     """
 
     max_edges: int | None = DEFAULT_MAX_EDGES
@@ -225,8 +227,9 @@ class TerminationBudget:
 
 def check_termination(
     space: StateSpace,
-    budget: TerminationBudget | None = None,
+    limits: TerminationLimits | None = None,
     graph: Callable[[], StateGraph] | None = None,
+    budget: Budget | None = None,
 ) -> list[PropertyResult]:
     """The three termination properties of ``space.net`` (none when it is not a
     mission, see `applies`); a requirement this version does not know is an
@@ -234,15 +237,17 @@ def check_termination(
 
     Args:
         space: The explored state space (complete or not, reduced or not).
-        budget: Edge, state and time budgets.
+        limits: Edge, state and time limits.
         graph: Gives the reachability graph of ``space`` when it is not reduced (or
             raises `GraphError`): a caller that shares one graph between several
             checks passes it; by default it is built here.
+        budget: The caller's budget (clock and deadline); the stages take slices of it.
     """
     net = space.net
     if not applies(net):
         return []
-    results = _Termination(space, budget or TerminationBudget(), graph).results()
+    checker = _Termination(space, limits or TerminationLimits(), graph, budget or Budget())
+    results = checker.results()
     for name in net.requirements:
         if name not in REQUIREMENTS:
             results.append(
@@ -289,11 +294,13 @@ class _Termination(_Results):
     def __init__(
         self,
         space: StateSpace,
-        budget: TerminationBudget,
+        limits: TerminationLimits,
         graph: Callable[[], StateGraph] | None,
+        budget: Budget,
     ) -> None:
         self.space = space
         self.net = space.net
+        self.limits = limits
         self.budget = budget
         self.graph = graph
         self.required = set(required_keys(self.net))
@@ -308,7 +315,9 @@ class _Termination(_Results):
         if space.reduced and space.complete:
             # The reduced graph keeps deadlocks, not cycles: explore all of it.
             full = explore(
-                self.net, max_states=self.budget.max_states, time_limit=self.budget.time_limit
+                self.net,
+                max_states=self.limits.max_states,
+                budget=self.budget.child(seconds=self.limits.time_limit),
             )
             if not full.complete:
                 why = f"the unreduced state space is incomplete ({full.stopped_reason})"
@@ -318,7 +327,9 @@ class _Termination(_Results):
                     graph = self.graph()
                 else:
                     graph = build_graph(
-                        full, max_edges=self.budget.max_edges, time_limit=self.budget.time_limit
+                        full,
+                        max_edges=self.limits.max_edges,
+                        budget=self.budget.child(seconds=self.limits.time_limit),
                     )
             except GraphError as exc:
                 why = str(exc)

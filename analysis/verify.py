@@ -21,7 +21,6 @@ conflicts are markings with two commands in flight that drive one vehicle resour
 from __future__ import annotations
 
 import itertools
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
@@ -30,6 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from analysis.budget import Budget
 from analysis.coverability import coverability
 from analysis.inputs import has_inputs
 from analysis.progress import ProgressCallback
@@ -48,7 +48,7 @@ from analysis.termination import (
     DEFAULT_MAX_DEADLOCKS,
     DEFAULT_MAX_EDGES,
     FinalPatterns,
-    TerminationBudget,
+    TerminationLimits,
     check_termination,
     final_rows,
     non_final_dead_states,
@@ -70,6 +70,7 @@ STRUCTURE_SECONDS = 2.0  # each structural computation; results say when they we
 QUICK_COVERABILITY_NODES = 2_000
 QUICK_COVERABILITY_SECONDS = 1.0
 COVERABILITY_SECONDS = 10.0
+PAIR_SECONDS = 10.0  # each state-equation proof that two resources never meet
 UNBOUNDED_STATES = 20_000
 REALISE_NODES = 20_000  # firing orders tried to turn a state-equation solution into a trace
 DENSE_CELL_LIMIT = 25_000_000  # places x transitions the dense encodings accept (~200 MB)
@@ -88,7 +89,9 @@ class VerifyOptions:
             of the places properties look at, with fewer states. State counts then
             describe the reduced graph; bounds come from coverability.
         structural: Also compute invariants, structural boundedness, siphons/traps.
-        z3_timeout_ms: Time limit of each z3 query.
+        z3_timeout_ms: Cap of each z3 query, in milliseconds (the name is kept: it is
+            recorded in certificates); `analysis.budget.Budget.z3_timeout_ms` turns the
+            remaining time back into z3's milliseconds.
         coverability_nodes: Node budget of the Karp-Miller tree grown when the explicit
             search is incomplete (a small tree is always built first: it proves an
             unbounded net unbounded in milliseconds).
@@ -111,9 +114,11 @@ class VerifyOptions:
     max_edges: int | None = DEFAULT_MAX_EDGES
 
 
-def verify(net: Net, options: VerifyOptions | None = None) -> Report:
+def verify(
+    net: Net, options: VerifyOptions | None = None, *, budget: Budget | None = None
+) -> Report:
     """Decide every property of ``net``; see the module docstring for the methods."""
-    return run_verification(net, options).report
+    return run_verification(net, options, budget=budget).report
 
 
 @dataclass(frozen=True)
@@ -132,14 +137,25 @@ class Verification:
     space: StateSpace | None
 
 
-def run_verification(net: Net, options: VerifyOptions | None = None) -> Verification:
-    """`verify`, keeping the explored state space for callers that look further."""
+def run_verification(
+    net: Net, options: VerifyOptions | None = None, *, budget: Budget | None = None
+) -> Verification:
+    """`verify`, keeping the explored state space for callers that look further.
+
+    Args:
+        net: The net.
+        options: Budgets (each stage's own: ``time_limit`` for the explicit search...)
+            and switches.
+        budget: The run's budget: its clock times every stage (tests pass a fake one)
+            and every stage's slice ends by its deadline. None: no overall limit.
+    """
     options = options or VerifyOptions()
-    started = time.perf_counter()
+    budget = budget or Budget()
+    started = budget.clock()
     cells = len(net.places) * len(net.transitions)
     if cells > DENSE_CELL_LIMIT:
-        return Verification(_too_large(net, cells, time.perf_counter() - started), None)
-    checker = _Checker(net, options)
+        return Verification(_too_large(net, cells, budget.clock() - started), None)
+    checker = _Checker(net, options, budget)
     properties = [
         checker.bounded(),
         checker.deadlock(),
@@ -158,7 +174,7 @@ def run_verification(net: Net, options: VerifyOptions | None = None) -> Verifica
         statespace=checker.figures(),
         properties=properties,
         structure=structure,
-        seconds=time.perf_counter() - started,
+        seconds=budget.clock() - started,
     )
     return Verification(report, checker.space)
 
@@ -196,9 +212,11 @@ def _too_large(net: Net, cells: int, seconds: float) -> Report:
 
 
 class _Checker:
-    def __init__(self, net: Net, options: VerifyOptions) -> None:
+    def __init__(self, net: Net, options: VerifyOptions, budget: Budget) -> None:
         self.net = net
         self.options = options
+        self.budget = budget
+        self.query_seconds = options.z3_timeout_ms / 1000
         visible = None
         if options.por:
             watched = {p for a in net.assertions for p, _ in a.places}
@@ -210,7 +228,9 @@ class _Checker:
         # milliseconds, and the explicit search is then only worth a small budget (it
         # can still find real counterexamples for the other properties).
         self.cover = coverability(
-            net, max_nodes=QUICK_COVERABILITY_NODES, time_limit=QUICK_COVERABILITY_SECONDS
+            net,
+            max_nodes=QUICK_COVERABILITY_NODES,
+            budget=budget.child(seconds=QUICK_COVERABILITY_SECONDS),
         )
         max_states, time_limit = options.max_states, options.time_limit
         if self.cover.bounded is False:
@@ -219,7 +239,7 @@ class _Checker:
         self.space: StateSpace = explore(
             net,
             max_states=max_states,
-            time_limit=time_limit,
+            budget=budget.child(seconds=time_limit),
             por=options.por,
             visible=visible,
             progress=options.progress,
@@ -239,7 +259,7 @@ class _Checker:
                 self._graph = build_graph(
                     self.space,
                     max_edges=self.options.max_edges,
-                    time_limit=self.options.time_limit,
+                    budget=self.budget.child(seconds=self.options.time_limit),
                 )
             except GraphError as exc:
                 self._graph = exc
@@ -335,14 +355,17 @@ class _Checker:
         )
 
     def _state_equation(
-        self, bad: stateeq.BadMarkings, time_limit: float = 30.0
+        self, bad: stateeq.BadMarkings, seconds: float = 30.0
     ) -> tuple[stateeq.StateEquationResult, Evidence | None]:
         """Run the state equation; a Candidate is confirmed only if some firing order of
         its counts replays on the net and ends in a bad marking (then it is real)."""
         from analysis import stateeq
 
         result = stateeq.check_unreachable(
-            self.net, bad, timeout_ms=self.options.z3_timeout_ms, time_limit=time_limit
+            self.net,
+            bad,
+            query_seconds=self.query_seconds,
+            budget=self.budget.child(seconds=seconds),
         )
         if not isinstance(result, stateeq.Candidate):
             return result, None
@@ -381,7 +404,7 @@ class _Checker:
             result = coverability(
                 self.net,
                 max_nodes=self.options.coverability_nodes,
-                time_limit=COVERABILITY_SECONDS,
+                budget=self.budget.child(seconds=COVERABILITY_SECONDS),
             )
         if result.bounded is False:
             name = result.unbounded[0]
@@ -407,7 +430,10 @@ class _Checker:
         from analysis.structural import structural_boundedness
 
         structural = structural_boundedness(
-            self.net, timeout_ms=self.options.z3_timeout_ms, per_place=False
+            self.net,
+            query_seconds=self.query_seconds,
+            per_place=False,
+            budget=self.budget.child(),
         )
         if structural.structurally_bounded:
             return PropertyResult(
@@ -494,12 +520,13 @@ class _Checker:
         bounded = self.cover.bounded is not False  # else the small budgets, as above
         return check_termination(
             self.space,
-            TerminationBudget(
+            TerminationLimits(
                 max_edges=self.options.max_edges,
                 max_states=self.options.max_states if bounded else UNBOUNDED_STATES,
                 time_limit=self.options.time_limit if bounded else UNBOUNDED_SECONDS,
             ),
             self.state_graph,
+            self.budget,
         )
 
     def final_reachable(self) -> list[PropertyResult]:
@@ -517,8 +544,7 @@ class _Checker:
                     title,
                     Verdict.PROVEN,
                     self.method,
-                    f"{reached} reached in "
-                    f"{self.space.depth_of(hit)} step(s) (witness trace in the JSON report)",
+                    f"{reached} reached in {self.space.depth_of(hit)} step(s)",
                     self._witness(hit),
                 )
             ]
@@ -672,8 +698,8 @@ class _Checker:
             result = stateeq.check_unreachable(
                 net,
                 stateeq.never_together([a.name, b.name]),
-                timeout_ms=self.options.z3_timeout_ms,
-                time_limit=10.0,
+                query_seconds=self.query_seconds,
+                budget=self.budget.child(seconds=PAIR_SECONDS),
             )
             if not isinstance(result, stateeq.Proven):
                 unproven.append(f"{a.pending_of} with {b.pending_of}")
@@ -681,8 +707,8 @@ class _Checker:
             result = stateeq.check_unreachable(
                 net,
                 stateeq.above_bound([p.name], 1),
-                timeout_ms=self.options.z3_timeout_ms,
-                time_limit=10.0,
+                query_seconds=self.query_seconds,
+                budget=self.budget.child(seconds=PAIR_SECONDS),
             )
             if not isinstance(result, stateeq.Proven):
                 unproven.append(f"{p.pending_of} twice")
@@ -788,7 +814,7 @@ class _Checker:
                 title,
                 Verdict.PROVEN,
                 self.method,
-                f"reached in {self.space.depth_of(hit)} step(s) (witness trace in the JSON report)",
+                f"reached in {self.space.depth_of(hit)} step(s)",
                 self._witness(hit),
                 location,
             )
@@ -851,7 +877,7 @@ class _Checker:
         }
         net_class = classify(net)
         facts["class"] = list(net_class.names())
-        invariants = invariant_report(net, time_limit=STRUCTURE_SECONDS)
+        invariants = invariant_report(net, budget=self.budget.child(seconds=STRUCTURE_SECONDS))
         facts["invariants"] = {
             "summary": invariants.explain(),
             "p_invariants": [inv.describe() for inv in invariants.p.invariants[:50]],
@@ -870,16 +896,13 @@ class _Checker:
             }
         else:
             bounded = structural_boundedness(
-                net,
-                timeout_ms=self.options.z3_timeout_ms,
-                per_place=False,
-                time_limit=STRUCTURE_SECONDS,
+                net, query_seconds=self.query_seconds, per_place=False, budget=self.budget.child()
             )
             facts["structural_boundedness"] = {
                 "verdict": bounded.structurally_bounded,
                 "summary": bounded.explain(),
             }
-        siphons = siphon_trap_check(net, time_limit=STRUCTURE_SECONDS)
+        siphons = siphon_trap_check(net, budget=self.budget.child(seconds=STRUCTURE_SECONDS))
         summary = siphons.explain()
         if has_inputs(net):
             summary += (

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from analysis.certificate import check_certificate, make_certificate, write_certificate
 from analysis.verify import verify
+from coral_lang.cliframe import positive_int
 from coral_lang.compiler import compile_mission
 from runtime.engine import Engine, Outcome, Policy
 from runtime.fuzz import FuzzOptions, fuzz
@@ -58,14 +59,16 @@ def random_schedule(rng: random.Random) -> Schedule:
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and print the figures."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
-    parser.add_argument("--runs", type=int, default=20, help="network-level runs (default 20)")
+    parser.add_argument(
+        "--runs", type=positive_int, default=20, help="network-level runs (default 20)"
+    )
     parser.add_argument(
         "--link", default="genoa-lisbon", help="link profile (default genoa-lisbon)"
     )
     parser.add_argument("--seed", type=int, default=0, help="first run seed (default 0)")
     parser.add_argument(
         "--engine-schedules",
-        type=int,
+        type=positive_int,
         default=2000,
         help="engine-level schedules (default 2000)",
     )

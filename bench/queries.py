@@ -224,7 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark; returns the exit code."""
-    from analysis.examinations import EXAMINATIONS, Budget
+    from analysis.examinations import EXAMINATIONS, QueryLimits
 
     args = build_parser().parse_args(argv)
     data = Data()
@@ -241,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.peer and not args.peer_path.is_file():
         print(f"no verifypn at {args.peer_path}", file=sys.stderr)
         return 2
-    budget = Budget(
+    budget = QueryLimits(
         max_states=args.max_states, time_limit=args.time_limit, max_edges=args.max_edges
     )
     print(f"data: {data.root}  instances: {len(names)}  examinations: {len(exams)}", flush=True)

@@ -16,6 +16,8 @@ CODES: dict[str, str] = {
     "CORAL008": "temporal property outside its logic (or an atom it cannot use)",
     "CORAL009": "unknown requirement",
     "CORAL010": "operator input misused (signalled, given tokens or a capacity, too many)",
+    "CORAL011": "mission part header wrong (mission missing or not including the part, "
+    "names itself or another part, misplaced or malformed)",
     "CORAL101": "unknown command",
     "CORAL102": "parameter count wrong, parameter missing, unknown or given twice",
     "CORAL103": "parameter type wrong",

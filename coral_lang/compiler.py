@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -79,6 +80,11 @@ class CompileResult:
     sources: dict[str, str]
     missions: list[ast.Mission] = field(default_factory=list)
     profile: VehicleProfile | None = None
+    part_of: Path | None = None
+    """Set when the file given was a *part* of a mission (it starts with ``# coral: part
+    of FILE.coral``): the whole mission's file, which is what this result compiled."""
+    part_path: Path | None = None
+    """With `part_of`: the part's own path, the file that was given."""
 
     @property
     def errors(self) -> list[Diagnostic]:
@@ -154,6 +160,92 @@ def compile_mission(path: str | Path, profiles: Sequence[VehicleProfile] = ()) -
     return compile_file(path, profiles).raise_for_errors()
 
 
+PART_SUFFIX = ".coral"
+_PART_HEADER = re.compile(r"^[ \t]*#[ \t]*coral:[ \t]*part\b[^\n]*", re.M)
+_PART_OF = re.compile(r"#[ \t]*coral:[ \t]*part[ \t]+of[ \t]+(?P<file>\S(?:.*\S)?)[ \t\r]*$")
+_FIRST_DECLARATION = re.compile(r"^[ \t\r\f\v]*[^#\s]", re.M)
+_MAX_PART_ERRORS = 20
+_MAX_PART_NAME = 1024
+"""Longest mission file name a header may give: longer is refused as malformed, so a
+hostile name never reaches the file system or a message at length."""
+
+
+@dataclass(frozen=True)
+class PartHeader:
+    """A part's header ``# coral: part of FILE.coral``: the whole mission it belongs to.
+
+    ``mission`` is the file name as written, relative to the part's folder; ``span``
+    covers the comment, for diagnostics about it.
+    """
+
+    mission: str
+    span: Span
+
+
+def part_header(text: str, file: str) -> tuple[PartHeader | None, list[Diagnostic]]:
+    """The part header of ``text``, if it has one, and the errors of its other ones.
+
+    A header counts only as a comment line of its own before the file's first
+    declaration (comments and blank lines may come before it). Why so strict: the
+    header changes what checking the file means (its whole mission is checked
+    instead), so it must be where a reader looks first. A header anywhere else, a
+    second header, or one not of the form ``# coral: part of FILE.coral`` is an error
+    (CORAL011), so a misplaced one is never silently ignored.
+    """
+    if "coral:" not in text:  # the common case, one scan of the text
+        return None, []
+    first = _FIRST_DECLARATION.search(text)
+    top_end = first.start() if first is not None else len(text)
+    header: PartHeader | None = None
+    errors: list[Diagnostic] = []
+    line, counted = 1, 0  # lines counted up to offset `counted`: linear in the text
+    for match in _PART_HEADER.finditer(text):
+        if len(errors) >= _MAX_PART_ERRORS:
+            break  # a file of nothing but headers: the first ones say it all
+        line += text.count("\n", counted, match.start())
+        counted = match.start()
+        comment = match.group().rstrip()
+        col = len(comment) - len(comment.lstrip()) + 1
+        span = Span(file, line, col, line, len(comment) + 1)
+        parsed = _PART_OF.search(comment)
+        named = parsed.group("file") if parsed is not None else ""
+        if not (
+            named.endswith(PART_SUFFIX) and named.isprintable() and len(named) <= _MAX_PART_NAME
+        ):
+            errors.append(
+                Diagnostic(
+                    Severity.ERROR,
+                    "CORAL011",
+                    "a part's header names its mission's file: "
+                    f"'# coral: part of MISSION{PART_SUFFIX}'",
+                    span,
+                )
+            )
+        elif match.start() > top_end:
+            errors.append(
+                Diagnostic(
+                    Severity.ERROR,
+                    "CORAL011",
+                    "'# coral: part of' must come before the file's first declaration",
+                    span,
+                    ("only comments and blank lines may come before a part's header",),
+                )
+            )
+        elif header is not None:
+            errors.append(
+                Diagnostic(
+                    Severity.ERROR,
+                    "CORAL011",
+                    "a file is a part of one mission only: "
+                    f"line {header.span.line} already names {header.mission}",
+                    span,
+                )
+            )
+        else:
+            header = PartHeader(named, span)
+    return header, errors
+
+
 @dataclass
 class _PlaceInfo:
     name: str
@@ -198,6 +290,7 @@ class _Compiler:
         self.missions: list[ast.Mission] = []
         self.loaded: set[Path] = set()
         self.declarations: list[tuple[ast.Declaration, str]] = []
+        self.root_part: PartHeader | None = None  # the root file's part header, if any
 
     # -- loading and includes -------------------------------------------------------------
 
@@ -238,6 +331,10 @@ class _Compiler:
         self.sources[file] = text
         if resolved is not None:
             self.loaded.add(resolved)
+        header, misplaced = part_header(text, file)
+        self.diagnostics.extend(misplaced)
+        if not self.missions:
+            self.root_part = header
         mission, diagnostics = parse(text, file)
         self.diagnostics.extend(diagnostics)
         self.missions.append(mission)
@@ -349,8 +446,13 @@ class _Compiler:
     def _header(self, root: ast.Mission) -> VehicleProfile | None:
         if root.name is None:
             self.error(
-                "CORAL007", "a mission file starts with 'mission NAME'", Span(root.file, 1, 1, 1, 2)
+                "CORAL007",
+                "a mission file starts with 'mission NAME'",
+                Span(root.file, 1, 1, 1, 2),
+                *self._part_note(),
             )
+            if self.root_part is not None:
+                return None  # a part: its mission says the vehicle
         if root.vehicle is None:
             self.error(
                 "CORAL007",
@@ -382,6 +484,16 @@ class _Compiler:
                 "pass the profile file with --profile FILE",
             )
             return None
+
+    def _part_note(self) -> tuple[str, ...]:
+        """For a part compiled on its own: where its whole mission is."""
+        if self.root_part is None:
+            return ()
+        return (
+            f"this file is a part of {self.root_part.mission} (line {self.root_part.span.line}): "
+            "check that mission, or give this file to coral-check, which checks the "
+            "mission it is a part of",
+        )
 
     def _consts(self) -> dict[str, _ConstInfo]:
         consts: dict[str, _ConstInfo] = {}

@@ -218,17 +218,54 @@ class CompileError(CoralError, ValueError):
         super().__init__(render_all(self.diagnostics, self.sources))
 
 
+MAX_PROFILE_ERRORS_SHOWN = 50
+"""Most errors a `ProfileError`'s message lists (all are in its ``errors``): a garbage
+profile can hold thousands, and nobody reads past the first screen."""
+
+
 class ProfileError(CoralError, ValueError):
     """A vehicle profile is malformed; ``path`` is the YAML path of the offending field.
 
     Fix the field named in the message (for example ``commands.DEPTH.params[0].max``).
+    A profile with several mistakes gives one error carrying all of them (`errors`,
+    in document order), and its message lists them, one per line: fixing a profile
+    should not take one run per mistake. ``file``, ``path`` and ``detail`` are the
+    first one's.
     """
 
-    def __init__(self, file: str, path: str, message: str):
+    def __init__(
+        self, file: str, path: str, message: str, more: Iterable[ProfileError] = ()
+    ) -> None:
         self.file = file
         self.path = path
         self.detail = message
-        super().__init__(f"{file}: {path}: {message}" if path else f"{file}: {message}")
+        self.more = tuple(m for error in more for m in error.errors)
+        lines = [error.line() for error in self.errors[:MAX_PROFILE_ERRORS_SHOWN]]
+        hidden = len(self.more) + 1 - len(lines)
+        if hidden > 0:
+            lines.append(f"... and {hidden} more error{'s' if hidden != 1 else ''}")
+        super().__init__("\n".join(lines))
+
+    @classmethod
+    def collected(cls, errors: Iterable[ProfileError]) -> ProfileError:
+        """One error carrying every one of ``errors`` (at least one)."""
+        first, *rest = errors
+        return cls(first.file, first.path, first.detail, (*first.more, *rest))
+
+    @property
+    def errors(self) -> tuple[ProfileError, ...]:
+        """This error and every other one found with it, each alone."""
+        if not self.more:
+            return (self,)
+        return (ProfileError(self.file, self.path, self.detail), *self.more)
+
+    def line(self) -> str:
+        """The first error alone: ``file:line:col: field.path: message``."""
+        return (
+            f"{self.file}: {self.path}: {self.detail}"
+            if self.path
+            else f"{self.file}: {self.detail}"
+        )
 
 
 class PnmlError(CoralError, ValueError):

@@ -47,6 +47,7 @@ class Kind(enum.Enum):
     SLASH = "'/'"
     MINUS = "'-'"
     ERROR = "bad character"  # already reported by the lexer; the parser stays quiet on it
+    COMMENT = "comment"  # only in the list tokenize(comments=...) fills; never parsed
     EOF = "end of file"
 
 
@@ -156,8 +157,15 @@ class Token(NamedTuple):
         return f"'{self.text}'"
 
 
-def tokenize(text: str, file: str) -> tuple[list[Token], list[Diagnostic]]:
-    """Split ``text`` into tokens; bad characters become diagnostics, never exceptions."""
+def tokenize(
+    text: str, file: str, comments: list[Token] | None = None
+) -> tuple[list[Token], list[Diagnostic]]:
+    """Split ``text`` into tokens; bad characters become diagnostics, never exceptions.
+
+    Comments are not tokens: the parser never sees them. The formatter needs them back,
+    so given a ``comments`` list the lexer appends each one to it (kind `Kind.COMMENT`,
+    text without trailing white space). Compiling passes none and pays nothing for it.
+    """
     tokens: list[Token] = []
     diagnostics: list[Diagnostic] = []
     append = tokens.append
@@ -211,6 +219,10 @@ def tokenize(text: str, file: str) -> tuple[list[Token], list[Diagnostic]]:
                     kind = Kind.ERROR  # the parser stays quiet on it: reported here
                 append(new(token_cls, (kind, number, file, line, col, line, offset + 1)))
             elif comment:
+                if comments is not None:
+                    body = comment.rstrip()
+                    end = col + len(body)
+                    comments.append(Token(Kind.COMMENT, body, file, line, col, line, end))
                 break
             elif string:
                 offset = col - 1 + len(string)

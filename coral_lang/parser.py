@@ -1,7 +1,10 @@
 """Recursive-descent parser for CORAL missions, with error recovery.
 
 A syntax error is recorded and the parser skips to the next statement keyword, so
-one run reports every error of a file. The grammar is in ``docs/language.md``.
+one run reports every error of a file. A ',' missing after a number in a list is the
+exception: it is recorded and the list goes on (`_Parser.missing_comma`), so what
+follows is not lost and the compiler reports nothing more about it. The grammar is in
+``docs/language.md``.
 """
 
 from __future__ import annotations
@@ -36,6 +39,14 @@ _COMPARISONS = {
     Kind.GE: ">=",
     Kind.GT: ">",
 }
+# The comma-separated lists a missing ',' is recognised in, each with the token that
+# must follow a name for it to start the next item (None: the name alone does).
+_LIST_FOLLOW: dict[str, Kind | None] = {
+    "places": None,
+    "arguments": Kind.EQUALS,
+    "replies": Kind.COLON,
+}
+_UNIT_HINT = " (or a unit after the number: s, min, ...)"
 # Tokens that can follow a place name inside a state expression.
 _CONTINUES_TERM = frozenset(
     {*_COMPARISONS, Kind.STAR, Kind.PLUS, Kind.ARROW, Kind.EQUALS, Kind.DOT}
@@ -50,8 +61,18 @@ def parse(text: str, file: str = "<mission>") -> tuple[ast.Mission, list[Diagnos
     """Parse mission ``text``; returns the tree (possibly partial) and all diagnostics."""
     with cyclic_gc_paused():
         tokens, diagnostics = tokenize(text, file)
-        parser = _Parser(tokens, file, diagnostics)
-        return parser.mission(), parser.diagnostics
+        return parse_tokens(tokens, file, diagnostics)
+
+
+def parse_tokens(
+    tokens: list[Token], file: str, diagnostics: list[Diagnostic]
+) -> tuple[ast.Mission, list[Diagnostic]]:
+    """Parse tokens `tokenize` made (``diagnostics`` are its own, extended in place).
+
+    For callers that lex for themselves: the formatter lexes once, keeping comments.
+    """
+    parser = _Parser(tokens, file, diagnostics)
+    return parser.mission(), parser.diagnostics
 
 
 def _join(a: Span | Token, b: Span | Token) -> Span:
@@ -72,6 +93,8 @@ class _Parser:
         self.previous: Token = tokens[0]
         # Where the property expression being parsed stands, for errors ("" outside one).
         self._context = ""
+        # The position just after the last number (and unit) read, for `missing_comma`.
+        self._number_end = -1
 
     # -- token helpers ----------------------------------------------------------------
 
@@ -133,6 +156,39 @@ class _Parser:
                 f"'?' is only allowed at the end of a command name, not in {what} '{token.text}'"
             )
         return self.advance()
+
+    def missing_comma(self, items: str, *, same_line: bool = True, unit_hint: bool = True) -> bool:
+        """Whether a list of ``items`` goes on after a missing ','; reports it if so.
+
+        ``place start = 1 done`` means two places: read as a unit, ``done`` gave
+        "unknown unit" and, the whole statement lost, an "unknown place" at every use
+        of ``start`` and ``done``. A name that can start the next item, right after a
+        number (and its unit) that ended an item, on the same line unless the list is in
+        braces, is one error at the name, and the list goes on as if the comma were
+        there, so nothing after it is lost. A name after a name stays the error it was:
+        nothing says which of the two is the mistake. A constant's name as a count
+        (``place start = N done``) ends an item as a number does. ``unit_hint`` False:
+        the number was a weight, which never takes a unit, so the hint would mislead.
+        """
+        token = self.tok
+        if (
+            self._number_end != self.pos
+            or token.kind is not Kind.IDENT
+            or token.text in KEYWORDS
+            or (same_line and token.line != self.previous.end_line)
+        ):
+            return False
+        follow = _LIST_FOLLOW[items]
+        if follow is not None and self.tokens[self.pos + 1].kind is not follow:
+            return False
+        numeric = self.previous.kind in (Kind.INT, Kind.FLOAT)
+        hint = _UNIT_HINT if unit_hint and numeric else ""
+        self.diagnostics.append(
+            Diagnostic(
+                Severity.ERROR, "CORAL001", f"expected ',' between {items}{hint}", token.span
+            )
+        )
+        return True
 
     def synchronise(self, start: int) -> None:
         """Skip to the next statement keyword (or end of file) after position ``start``."""
@@ -242,7 +298,7 @@ class _Parser:
             value = self.number(f"as the value of '{name.text}'")
         return ast.Const(name.text, value, _join(keyword, self.previous))
 
-    def number(self, context: str) -> ast.Number:
+    def number(self, context: str, items: str = "") -> ast.Number:
         minus = self.accept(Kind.MINUS)
         if not (self.at(Kind.INT) or self.at(Kind.FLOAT)):
             raise self.error(f"expected a number {context}, found {self.tok.describe()}")
@@ -252,7 +308,8 @@ class _Parser:
         if minus is not None:
             value = -value
         start = minus.span if minus is not None else token.span
-        unit = self.unit(token)
+        unit = self.unit(token, items)
+        self._number_end = self.pos
         return ast.Number(value, unit, _join(start, self.previous))
 
     def numeric(self, token: Token) -> int | float:
@@ -274,17 +331,26 @@ class _Parser:
             raise self.error(f"number out of range: {token.text}", token.span)
         return real
 
-    def unit(self, number: Token) -> str | None:
-        """A unit written right after a number on the same line (``2.0 m``, ``0.5 m/s``)."""
+    def unit(self, number: Token, items: str = "") -> str | None:
+        """A unit written right after a number on the same line (``2.0 m``, ``0.5 m/s``).
+
+        Inside a list of ``items``, a name that is no unit but can start the next item
+        is left for `missing_comma` to report.
+        """
         token = self.tok
         if (
             token.kind is not Kind.IDENT
-            or token.span.line != number.span.line
+            or token.line != number.line
             or token.text in KEYWORDS
             or self._context  # token counts in a property have no unit: 'p*2 U q'
         ):
             return None
         name = token.text
+        if items and not units.is_unit(name):
+            follow = self.tokens[self.pos + 1].kind
+            wanted = _LIST_FOLLOW[items]
+            if follow is not Kind.SLASH and (wanted is None or follow is wanted):
+                return None
         self.advance()
         if self.at(Kind.SLASH):
             self.advance()
@@ -297,17 +363,18 @@ class _Parser:
             )
         return name
 
-    def count(self, context: str) -> ast.Number | ast.Name:
+    def count(self, context: str, items: str = "") -> ast.Number | ast.Name:
         """A token count, weight or bound: a number or a constant's name."""
         if self.tok.kind is Kind.IDENT and self.tok.text not in KEYWORDS:
             token = self.advance()
+            self._number_end = self.pos  # a name ends an item as a number does
             return ast.Name(token.text, token.span)
-        return self.number(context)
+        return self.number(context, items)
 
     def places(self) -> ast.Places:
         keyword = self.advance()
         decls = [self.place_decl()]
-        while self.accept(Kind.COMMA):
+        while self.accept(Kind.COMMA) or self.missing_comma("places"):
             decls.append(self.place_decl())
         return ast.Places(tuple(decls), _join(keyword, self.previous))
 
@@ -326,9 +393,9 @@ class _Parser:
         name = self.ident("a place name")
         initial = capacity = None
         if self.accept(Kind.EQUALS):
-            initial = self.count(f"as the initial tokens of '{name.text}'")
+            initial = self.count(f"as the initial tokens of '{name.text}'", "places")
         if self.accept(Kind.IDENT, "capacity"):
-            capacity = self.count(f"as the capacity of '{name.text}'")
+            capacity = self.count(f"as the capacity of '{name.text}'", "places")
         return ast.PlaceDecl(name.text, initial, capacity, _join(name, self.previous))
 
     def token_set(self, context: str) -> tuple[ast.TokenRef, ...]:
@@ -336,14 +403,17 @@ class _Parser:
         self.expect(Kind.LBRACE, context)
         refs: list[ast.TokenRef] = []
         if self.tok.kind is not Kind.RBRACE:
-            refs.append(self.token_ref())
-            while self.tok.kind is Kind.COMMA:
-                self.advance()
-                refs.append(self.token_ref())
+            refs.append(self.token_ref("places"))
+            while self.tok.kind is Kind.COMMA or (
+                self.tok.kind is Kind.IDENT
+                and self.missing_comma("places", same_line=False, unit_hint=False)
+            ):
+                self.accept(Kind.COMMA)
+                refs.append(self.token_ref("places"))
         self.expect(Kind.RBRACE, "to close the place set (places are separated by ',')")
         return tuple(refs)
 
-    def token_ref(self) -> ast.TokenRef:
+    def token_ref(self, items: str = "") -> ast.TokenRef:
         name = self.tok
         if name.kind is Kind.IDENT and name.text not in KEYWORDS and name.text[-1] != "?":
             self.advance()  # the common case, without ident()'s checks and messages
@@ -352,7 +422,7 @@ class _Parser:
         weight = None
         if self.tok.kind is Kind.STAR:
             self.advance()
-            weight = self.count(f"as the weight of '{name.text}'")
+            weight = self.count(f"as the weight of '{name.text}'", items)
         return ast.TokenRef(name.text, weight, _join(name, self.previous))
 
     def final(self) -> ast.Final:
@@ -682,7 +752,7 @@ class _Parser:
         self.expect(Kind.LPAREN, f"after '{system.text}'")
         command = self.ident("a command name", allow_query=True)
         args: list[ast.Arg] = []
-        while self.accept(Kind.COMMA):
+        while self.accept(Kind.COMMA) or self.missing_comma("arguments"):
             args.append(self.arg())
         self.expect(Kind.RPAREN, "to close the command's arguments")
         self.expect(Kind.ARROW, "after the command: map its replies with '-> { reply: place }'")
@@ -690,7 +760,9 @@ class _Parser:
         replies: list[ast.ReplyMap] = []
         if not self.at(Kind.RBRACE):
             replies.append(self.reply_map())
-            while self.accept(Kind.COMMA):
+            while self.accept(Kind.COMMA) or self.missing_comma(
+                "replies", same_line=False, unit_hint=False
+            ):
                 replies.append(self.reply_map())
         self.expect(Kind.RBRACE, "to close the reply map")
         close = self.expect(Kind.RBRACE, "to close 'action {'")
@@ -713,17 +785,17 @@ class _Parser:
         ):
             name = self.advance().text
             self.advance()
-        value = self.value("as an argument")
+        value = self.value("as an argument", "arguments")
         return ast.Arg(name, value, _join(start, self.previous))
 
-    def value(self, context: str) -> ast.Value:
+    def value(self, context: str, items: str = "") -> ast.Value:
         if self.at(Kind.STRING):
             token = self.advance()
             return ast.String(token.text, token.span)
         if self.tok.kind is Kind.IDENT and self.tok.text not in KEYWORDS:
             token = self.ident("a constant name")
             return ast.Name(token.text, token.span)
-        return self.number(context)
+        return self.number(context, items)
 
     def reply_map(self) -> ast.ReplyMap:
         reply = self.ident("a reply kind, e.g. done")
@@ -734,5 +806,5 @@ class _Parser:
         elif self.at(Kind.LBRACE):
             targets = self.token_set(f"after '{reply.text}:'")
         else:
-            targets = (self.token_ref(),)
+            targets = (self.token_ref("replies"),)
         return ast.ReplyMap(reply.text, targets, _join(reply, self.previous))

@@ -1,7 +1,8 @@
 """Print a mission tree back as CORAL text, in the canonical layout.
 
 ``parse(format_mission(tree))`` gives back ``tree`` (spans aside): the property tests
-hold the parser and printer to that.
+hold the parser and printer to that. The printer knows nothing of comments or blank
+lines: `coral_lang.formatting` lays out whole files with it and puts those back.
 """
 
 from __future__ import annotations
@@ -9,6 +10,10 @@ from __future__ import annotations
 from coral_lang import ast
 
 INDENT = "    "
+MAX_WIDTH = 100
+"""Longest line the layout aims at: an action longer than this on one line goes on two,
+its reply map under the command (the layout the examples are written in)."""
+_CONTINUATION = " " * len(f"{INDENT}action {{ ")
 
 
 def format_mission(mission: ast.Mission) -> str:
@@ -107,6 +112,14 @@ def _expr(expr: ast.Expr) -> tuple[int, str]:
     return own, f" {expr.op} ".join(parts)
 
 
+def list_items(declaration: ast.Places | ast.Inputs) -> list[tuple[int, str]]:
+    """The items of a ``place`` or ``input`` list, each with the source line it starts
+    on: the formatter keeps a commented list's line breaks where the source had them."""
+    if isinstance(declaration, ast.Places):
+        return [(p.span.line, _place(p)) for p in declaration.places]
+    return [(n.span.line, n.name) for n in declaration.names]
+
+
 def _place(place: ast.PlaceDecl) -> str:
     text = place.name
     if place.initial is not None:
@@ -114,6 +127,23 @@ def _place(place: ast.PlaceDecl) -> str:
     if place.capacity is not None:
         text += f" capacity {format_value(place.capacity)}"
     return text
+
+
+def transition_fields(transition: ast.TransitionDecl) -> list[str] | None:
+    """A transition without an action as the fields of one line (header, priority, wait,
+    signal; "" where absent), or None when it has an action. The formatter keeps such a
+    transition on one line when it was written on one, as a row of a table."""
+    if transition.action is not None:
+        return None
+    priority = transition.priority
+    return [
+        f"transition {transition.name}",
+        "" if priority is None else f"priority {format_value(priority)}",
+        f"wait {format_tokens(transition.wait)}"
+        if transition.wait or not transition.signal
+        else "",
+        f"signal {format_tokens(transition.signal)}" if transition.signal else "",
+    ]
 
 
 def _transition(transition: ast.TransitionDecl) -> list[str]:
@@ -124,17 +154,49 @@ def _transition(transition: ast.TransitionDecl) -> list[str]:
     if transition.wait or (transition.action is None and not transition.signal):
         lines.append(f"{INDENT}wait   {format_tokens(transition.wait)}")
     if transition.action is not None:
-        lines.append(f"{INDENT}action {{ {format_action(transition.action)} }}")
+        line = f"{INDENT}action {{ {format_action(transition.action)} }}"
+        if len(line) <= MAX_WIDTH:
+            lines.append(line)
+        else:
+            command, _ = _action_parts(transition.action)
+            lines.append(f"{INDENT}action {{ {command}")
+            lines.extend(_reply_lines(transition.action))
     if transition.signal:
         lines.append(f"{INDENT}signal {format_tokens(transition.signal)}")
     return lines
 
 
+def _reply_lines(action: ast.Action) -> list[str]:
+    """``-> { ack: a, error: b } }`` under the command, filled up to `MAX_WIDTH` and
+    then continued under the first reply (a long reply map stays readable)."""
+    replies = [_reply(r) for r in action.replies]
+    first = f"{_CONTINUATION}-> {{ "
+    under = " " * len(first)
+    lines: list[str] = []
+    current, fresh = first, True
+    last = len(replies) - 1
+    for number, reply in enumerate(replies):
+        piece = reply + ("," if number < last else " } }")
+        candidate = current + ("" if fresh else " ") + piece
+        if not fresh and len(candidate) > MAX_WIDTH:
+            lines.append(current)
+            candidate = under + piece
+        current, fresh = candidate, False
+    lines.append(current if replies else current + "} }")
+    return lines
+
+
 def format_action(action: ast.Action) -> str:
     """``ROMEO(DEPTH, z = 2.0) -> { ack: a, error: b }``."""
+    command, replies = _action_parts(action)
+    return f"{command} -> {{ {replies} }}"
+
+
+def _action_parts(action: ast.Action) -> tuple[str, str]:
+    """``ROMEO(DEPTH, z = 2.0)`` and ``ack: a, error: b``: an action either side of ``->``."""
     args = "".join(", " + _arg(a) for a in action.args)
     replies = ", ".join(_reply(r) for r in action.replies)
-    return f"{action.system}({action.command}{args}) -> {{ {replies} }}"
+    return f"{action.system}({action.command}{args})", replies
 
 
 def _arg(arg: ast.Arg) -> str:

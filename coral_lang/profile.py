@@ -20,7 +20,7 @@ from typing import Literal, cast
 from coral_lang import units
 from coral_lang.diagnostics import ProfileError, did_you_mean
 from coral_lang.safefile import PROFILE_LIMIT, UnreadableFile, read_text_file
-from coral_lang.yamlsource import Plain, YamlDocument, expect_keys, load_yaml
+from coral_lang.yamlsource import Plain, Problems, YamlDocument, expect_keys, load_yaml
 
 ParamType = Literal["float", "int", "string"]
 CommandKind = Literal["task", "query", "action"]
@@ -223,159 +223,278 @@ def _load_cached(path: str, mtime_ns: int) -> VehicleProfile:
 
 
 def parse_profile(text: str, file: str = "<profile>") -> VehicleProfile:
-    """Validate profile YAML ``text`` into a `VehicleProfile`."""
+    """Validate profile YAML ``text`` into a `VehicleProfile`.
+
+    Raises:
+        ProfileError: the text is not YAML coral reads, or breaks the schema. Every
+            mistake is reported, each with the file, line, column and field path
+            (``commands.DEPTH?.params[1].unit``), in one error (`ProfileError.errors`).
+    """
     doc = load_yaml(text, file)
     root = _mapping(doc, doc.data, "")
-    expect_keys(
+    problems = Problems()
+    problems.check(
+        expect_keys,
         doc,
         root,
         "",
         ["vehicle", "commands"],
         ["description", "resources", "version", "workspace"],
     )
-    name = _string(doc, root["vehicle"], "vehicle")
+    name = problems.check(_vehicle_name, doc, root["vehicle"]) if "vehicle" in root else None
+    if "version" in root:
+        problems.check(_version, doc, root["version"])
+    listed = problems.check(_string_list, doc, root.get("resources", []), "resources")
+    resources = tuple(listed) if listed is not None else None
+    commands = None
+    if "commands" in root:
+        commands = problems.check(_commands, doc, root["commands"], resources)
+    description = problems.check(_string, doc, root.get("description", ""), "description")
+    workspace = None
+    if "workspace" in root:
+        workspace = problems.check(_workspace, doc, root["workspace"])
+    problems.raise_any()
+    assert name is not None and commands is not None and description is not None
+    return VehicleProfile(
+        name=name,
+        description=description,
+        resources=resources or (),
+        commands=commands,
+        file=file,
+        workspace=workspace,
+    )
+
+
+def _vehicle_name(doc: YamlDocument, node: Plain) -> str:
+    name = _string(doc, node, "vehicle")
     if not name.isidentifier():
         raise doc.error(
             "vehicle", f"vehicle name '{name}' must be an identifier (letters, digits, _)"
         )
-    if "version" in root:
-        _version(doc, root["version"])
-    resources = tuple(_string_list(doc, root.get("resources", []), "resources"))
-    commands_node = _mapping(doc, root["commands"], "commands")
+    return name
+
+
+def _commands(
+    doc: YamlDocument, node: Plain, resources: tuple[str, ...] | None
+) -> tuple[CommandSpec, ...]:
+    """Every command; ``resources`` None: the profile's own list was malformed, so
+    which resources a command may use is not checked."""
+    commands_node = _mapping(doc, node, "commands")
     if not commands_node:
         raise doc.error("commands", "a profile must declare at least one command")
-    commands = tuple(
-        _command(doc, command_name, spec, f"commands.{command_name}", resources)
-        for command_name, spec in commands_node.items()
-    )
-    return VehicleProfile(
-        name=name,
-        description=_string(doc, root.get("description", ""), "description"),
-        resources=resources,
-        commands=commands,
-        file=file,
-        workspace=_workspace(doc, root["workspace"]) if "workspace" in root else None,
-    )
+    problems = Problems()
+    commands = [
+        problems.check(_command, doc, name, spec, f"commands.{name}", resources)
+        for name, spec in commands_node.items()
+    ]
+    problems.raise_any()
+    return tuple(c for c in commands if c is not None)
 
 
 def _workspace(doc: YamlDocument, node: Plain) -> Workspace:
     """``workspace: {x: [min, max], y: [min, max]}``, metres, each min < max."""
     spec = _mapping(doc, node, "workspace")
-    expect_keys(doc, spec, "workspace", ["x", "y"], [])
-    bounds: list[float] = []
-    for axis in ("x", "y"):
-        path = f"workspace.{axis}"
-        pair = _list(doc, spec[axis], path)
-        if len(pair) != 2:
-            raise doc.error(path, f"expected [min, max] in metres, got {len(pair)} values")
-        low, high = (_number(doc, value, f"{path}[{i}]") for i, value in enumerate(pair))
-        if low >= high:
-            raise doc.error(path, f"min {low:g} must be below max {high:g}")
-        bounds += [low, high]
+    problems = Problems()
+    problems.check(expect_keys, doc, spec, "workspace", ["x", "y"], [])
+    axes = [
+        problems.check(_axis, doc, spec[axis], f"workspace.{axis}")
+        for axis in ("x", "y")
+        if axis in spec
+    ]
+    problems.raise_any()
+    bounds = [bound for axis in axes if axis is not None for bound in axis]
     return Workspace(*bounds)
 
 
+def _axis(doc: YamlDocument, node: Plain, path: str) -> tuple[float, float]:
+    pair = _list(doc, node, path)
+    if len(pair) != 2:
+        raise doc.error(path, f"expected [min, max] in metres, got {len(pair)} values")
+    low, high = (_number(doc, value, f"{path}[{i}]") for i, value in enumerate(pair))
+    if low >= high:
+        raise doc.error(path, f"min {low:g} must be below max {high:g}")
+    return low, high
+
+
 def _command(
-    doc: YamlDocument, name: str, node: Plain, path: str, resources: tuple[str, ...]
+    doc: YamlDocument, name: str, node: Plain, path: str, resources: tuple[str, ...] | None
 ) -> CommandSpec:
+    problems = Problems()
     if not (name.rstrip("?").isidentifier() and name.count("?") <= 1):
-        raise doc.error(
-            path, f"command name '{name}' must be an identifier, optionally ending in '?'"
+        problems.add(
+            doc.error(
+                path, f"command name '{name}' must be an identifier, optionally ending in '?'"
+            )
         )
-    spec = _mapping(doc, node, path)
-    expect_keys(
+    spec = problems.check(_mapping, doc, node, path)
+    if spec is None:
+        problems.raise_any()
+    assert spec is not None
+    problems.check(
+        expect_keys,
         doc,
         spec,
         path,
         ["kind", "replies"],
         ["params", "resources", "duration_s", "description", "space_trap"],
     )
-    kind = _string(doc, spec["kind"], f"{path}.kind")
-    if kind not in COMMAND_KINDS:
-        raise doc.error(
-            f"{path}.kind", f"kind must be one of {', '.join(COMMAND_KINDS)}, not '{kind}'"
-        )
-    params = tuple(
-        _param(doc, p, f"{path}.params[{i}]")
-        for i, p in enumerate(_list(doc, spec.get("params", []), f"{path}.params"))
+    kind = (
+        problems.check(_command_kind, doc, spec["kind"], f"{path}.kind") if "kind" in spec else None
     )
-    seen: set[str] = set()
-    for i, param in enumerate(params):
-        if param.name in seen:
-            raise doc.error(f"{path}.params[{i}].name", f"parameter '{param.name}' declared twice")
-        seen.add(param.name)
-    replies, meanings = _replies(doc, spec["replies"], f"{path}.replies")
-    used = tuple(_string_list(doc, spec.get("resources", []), f"{path}.resources"))
-    for i, resource in enumerate(used):
-        if resource not in resources:
-            raise doc.error(
-                f"{path}.resources[{i}]",
-                f"unknown resource '{resource}'{did_you_mean(resource, resources)}; "
-                f"declare it under 'resources' (have: {', '.join(resources) or 'none'})",
-            )
-    duration = _number(doc, spec.get("duration_s", 0.0), f"{path}.duration_s")
-    if duration < 0:
-        raise doc.error(f"{path}.duration_s", "duration must be >= 0 seconds")
+    params = problems.check(_params, doc, spec.get("params", []), f"{path}.params")
+    replies = None
+    if "replies" in spec:
+        replies = problems.check(_replies, doc, spec["replies"], f"{path}.replies")
+    used = problems.check(
+        _used_resources, doc, spec.get("resources", []), f"{path}.resources", resources
+    )
+    duration = problems.check(_duration, doc, spec.get("duration_s", 0.0), f"{path}.duration_s")
     trap = None
     if "space_trap" in spec:
-        trap = _space_trap(doc, spec["space_trap"], f"{path}.space_trap")
+        if kind is not None and kind != "query":
+            problems.add(
+                doc.error(f"{path}.space_trap", "only queries (kind: query) have a space_trap")
+            )
+        else:
+            trap = problems.check(_space_trap, doc, spec["space_trap"], f"{path}.space_trap")
+    description = problems.check(_string, doc, spec.get("description", ""), f"{path}.description")
     if kind == "query":
-        time_out = next((p for p in params if p.name == TIME_OUT), None)
-        if time_out is None:
-            raise doc.error(f"{path}.params", f"a query must take a '{TIME_OUT}' parameter")
-        if time_out.unit is None or units.dimension(time_out.unit) != "time":
-            raise doc.error(f"{path}.params", f"'{TIME_OUT}' must have a time unit such as s")
-        if "timeout" not in replies:
-            raise doc.error(f"{path}.replies", "a query must be able to reply 'timeout'")
-    elif trap is not None:
-        raise doc.error(f"{path}.space_trap", "only queries (kind: query) have a space_trap")
+        if params is not None:
+            problems.check(_query_time_out, doc, params, path)
+        if replies is not None and "timeout" not in replies[0]:
+            problems.add(doc.error(f"{path}.replies", "a query must be able to reply 'timeout'"))
+    problems.raise_any()
+    assert kind is not None and params is not None and replies is not None
+    assert used is not None and duration is not None and description is not None
     return CommandSpec(
         name=name,
-        kind=cast(CommandKind, kind),
+        kind=kind,
         params=params,
-        replies=replies,
-        reply_meanings=meanings,
+        replies=replies[0],
+        reply_meanings=replies[1],
         resources=used,
         duration_s=duration,
-        description=_string(doc, spec.get("description", ""), f"{path}.description"),
+        description=description,
         space_trap=trap,
     )
 
 
+def _command_kind(doc: YamlDocument, node: Plain, path: str) -> CommandKind:
+    kind = _string(doc, node, path)
+    if kind not in COMMAND_KINDS:
+        raise doc.error(path, f"kind must be one of {', '.join(COMMAND_KINDS)}, not '{kind}'")
+    return cast(CommandKind, kind)
+
+
+def _params(doc: YamlDocument, node: Plain, path: str) -> tuple[ParamSpec, ...]:
+    problems = Problems()
+    params = [
+        problems.check(_param, doc, p, f"{path}[{i}]") for i, p in enumerate(_list(doc, node, path))
+    ]
+    seen: set[str] = set()
+    for i, param in enumerate(params):
+        if param is None:
+            continue
+        if param.name in seen:
+            problems.add(doc.error(f"{path}[{i}].name", f"parameter '{param.name}' declared twice"))
+        seen.add(param.name)
+    problems.raise_any()
+    return tuple(p for p in params if p is not None)
+
+
+def _query_time_out(doc: YamlDocument, params: tuple[ParamSpec, ...], path: str) -> None:
+    time_out = next((p for p in params if p.name == TIME_OUT), None)
+    if time_out is None:
+        raise doc.error(f"{path}.params", f"a query must take a '{TIME_OUT}' parameter")
+    if time_out.unit is None or units.dimension(time_out.unit) != "time":
+        raise doc.error(f"{path}.params", f"'{TIME_OUT}' must have a time unit such as s")
+
+
+def _used_resources(
+    doc: YamlDocument, node: Plain, path: str, resources: tuple[str, ...] | None
+) -> tuple[str, ...]:
+    used = tuple(_string_list(doc, node, path))
+    if resources is None:
+        return used
+    problems = Problems()
+    for i, resource in enumerate(used):
+        if resource not in resources:
+            problems.add(
+                doc.error(
+                    f"{path}[{i}]",
+                    f"unknown resource '{resource}'{did_you_mean(resource, resources)}; "
+                    f"declare it under 'resources' (have: {', '.join(resources) or 'none'})",
+                )
+            )
+    problems.raise_any()
+    return used
+
+
+def _duration(doc: YamlDocument, node: Plain, path: str) -> float:
+    duration = _number(doc, node, path)
+    if duration < 0:
+        raise doc.error(path, "duration must be >= 0 seconds")
+    return duration
+
+
 def _param(doc: YamlDocument, node: Plain, path: str) -> ParamSpec:
     spec = _mapping(doc, node, path)
-    expect_keys(doc, spec, path, ["name", "type"], ["unit", "min", "max", "description"])
-    name = _string(doc, spec["name"], f"{path}.name")
-    if not name.isidentifier():
-        raise doc.error(f"{path}.name", f"parameter name '{name}' must be an identifier")
-    type_ = _string(doc, spec["type"], f"{path}.type")
-    if type_ not in PARAM_TYPES:
-        raise doc.error(
-            f"{path}.type", f"type must be one of {', '.join(PARAM_TYPES)}, not '{type_}'"
-        )
+    problems = Problems()
+    problems.check(
+        expect_keys, doc, spec, path, ["name", "type"], ["unit", "min", "max", "description"]
+    )
+    name = (
+        problems.check(_param_name, doc, spec["name"], f"{path}.name") if "name" in spec else None
+    )
+    type_ = (
+        problems.check(_param_type, doc, spec["type"], f"{path}.type") if "type" in spec else None
+    )
     unit = None
     if spec.get("unit") is not None:
-        unit = _string(doc, spec["unit"], f"{path}.unit")
-        if not units.is_unit(unit):
-            raise doc.error(
-                f"{path}.unit", f"unknown unit '{unit}'{did_you_mean(unit, units.UNITS)}"
-            )
-        if type_ == "string":
-            raise doc.error(f"{path}.unit", "a string parameter has no unit")
-    minimum = _number(doc, spec["min"], f"{path}.min") if spec.get("min") is not None else None
-    maximum = _number(doc, spec["max"], f"{path}.max") if spec.get("max") is not None else None
+        unit = problems.check(_unit, doc, spec["unit"], f"{path}.unit")
+        if unit is not None and type_ == "string":
+            problems.add(doc.error(f"{path}.unit", "a string parameter has no unit"))
+    minimum = maximum = None
+    if spec.get("min") is not None:
+        minimum = problems.check(_number, doc, spec["min"], f"{path}.min")
+    if spec.get("max") is not None:
+        maximum = problems.check(_number, doc, spec["max"], f"{path}.max")
     if minimum is not None and maximum is not None and minimum > maximum:
-        raise doc.error(f"{path}.min", f"min {minimum:g} is greater than max {maximum:g}")
+        problems.add(doc.error(f"{path}.min", f"min {minimum:g} is greater than max {maximum:g}"))
     if type_ == "string" and (minimum is not None or maximum is not None):
-        raise doc.error(path, "a string parameter has no range")
+        problems.add(doc.error(path, "a string parameter has no range"))
+    description = problems.check(_string, doc, spec.get("description", ""), f"{path}.description")
+    problems.raise_any()
+    assert name is not None and type_ is not None and description is not None
     return ParamSpec(
         name=name,
-        type=cast(ParamType, type_),
+        type=type_,
         unit=unit,
         minimum=minimum,
         maximum=maximum,
-        description=_string(doc, spec.get("description", ""), f"{path}.description"),
+        description=description,
     )
+
+
+def _param_name(doc: YamlDocument, node: Plain, path: str) -> str:
+    name = _string(doc, node, path)
+    if not name.isidentifier():
+        raise doc.error(path, f"parameter name '{name}' must be an identifier")
+    return name
+
+
+def _param_type(doc: YamlDocument, node: Plain, path: str) -> ParamType:
+    type_ = _string(doc, node, path)
+    if type_ not in PARAM_TYPES:
+        raise doc.error(path, f"type must be one of {', '.join(PARAM_TYPES)}, not '{type_}'")
+    return cast(ParamType, type_)
+
+
+def _unit(doc: YamlDocument, node: Plain, path: str) -> str:
+    unit = _string(doc, node, path)
+    if not units.is_unit(unit):
+        raise doc.error(path, f"unknown unit '{unit}'{did_you_mean(unit, units.UNITS)}")
+    return unit
 
 
 def _replies(
@@ -391,50 +510,74 @@ def _replies(
         raise doc.error(path, "expected a list of reply kinds or a mapping reply -> meaning")
     if not names:
         raise doc.error(path, "a command must produce at least one reply kind")
+    problems = Problems()
     for i, reply in enumerate(names):
         if not reply.isidentifier():
-            raise doc.error(f"{path}[{i}]", f"reply kind '{reply}' must be an identifier")
-        if reply == "ignore":
-            raise doc.error(f"{path}[{i}]", "'ignore' is reserved for missions that drop a reply")
+            problems.add(doc.error(f"{path}[{i}]", f"reply kind '{reply}' must be an identifier"))
+        elif reply == "ignore":
+            problems.add(
+                doc.error(f"{path}[{i}]", "'ignore' is reserved for missions that drop a reply")
+            )
     if len(set(names)) != len(names):
-        raise doc.error(path, "a reply kind is listed twice")
+        problems.add(doc.error(path, "a reply kind is listed twice"))
+    problems.raise_any()
     return tuple(names), tuple(meanings)
 
 
 def _space_trap(doc: YamlDocument, node: Plain, path: str) -> SpaceTrap:
     spec = _mapping(doc, node, path)
-    expect_keys(doc, spec, path, ["signal", "order", "eps", "window_s"], [])
-    order_value = spec["order"]
-    if not isinstance(order_value, int) or isinstance(order_value, bool) or order_value < 0:
-        raise doc.error(f"{path}.order", "order must be a whole number >= 0")
-    eps = tuple(
-        _number(doc, e, f"{path}.eps[{i}]")
-        for i, e in enumerate(_list(doc, spec["eps"], f"{path}.eps"))
-    )
-    if len(eps) != order_value + 1:
-        raise doc.error(
-            f"{path}.eps",
-            f"order {order_value} needs {order_value + 1} tolerances "
-            f"(one per derivative 0..{order_value}), got {len(eps)}",
+    problems = Problems()
+    problems.check(expect_keys, doc, spec, path, ["signal", "order", "eps", "window_s"], [])
+    order = problems.check(_order, doc, spec["order"], f"{path}.order") if "order" in spec else None
+    eps = problems.check(_tolerances, doc, spec["eps"], f"{path}.eps") if "eps" in spec else None
+    if order is not None and eps is not None and len(eps) != order + 1:
+        problems.add(
+            doc.error(
+                f"{path}.eps",
+                f"order {order} needs {order + 1} tolerances "
+                f"(one per derivative 0..{order}), got {len(eps)}",
+            )
         )
+    window = None
+    if "window_s" in spec:
+        window = problems.check(_window, doc, spec["window_s"], f"{path}.window_s")
+    signal = None
+    if "signal" in spec:
+        signal = problems.check(_signal, doc, spec["signal"], f"{path}.signal")
+    problems.raise_any()
+    assert order is not None and eps is not None and window is not None and signal is not None
+    return SpaceTrap(signal=signal, order=order, eps=eps, window_s=window)
+
+
+def _order(doc: YamlDocument, node: Plain, path: str) -> int:
+    if not isinstance(node, int) or isinstance(node, bool) or node < 0:
+        raise doc.error(path, "order must be a whole number >= 0")
+    return node
+
+
+def _tolerances(doc: YamlDocument, node: Plain, path: str) -> tuple[float, ...]:
+    eps = tuple(_number(doc, e, f"{path}[{i}]") for i, e in enumerate(_list(doc, node, path)))
     if any(e <= 0 for e in eps):
-        raise doc.error(f"{path}.eps", "every tolerance must be > 0")
-    window = _number(doc, spec["window_s"], f"{path}.window_s")
+        raise doc.error(path, "every tolerance must be > 0")
+    return eps
+
+
+def _window(doc: YamlDocument, node: Plain, path: str) -> float:
+    window = _number(doc, node, path)
     if window <= 0:
-        raise doc.error(f"{path}.window_s", "window_s must be > 0")
-    signal = _string(doc, spec["signal"], f"{path}.signal")
+        raise doc.error(path, "window_s must be > 0")
+    return window
+
+
+def _signal(doc: YamlDocument, node: Plain, path: str) -> str:
+    signal = _string(doc, node, path)
     if signal not in SPACE_TRAP_SIGNALS:
         raise doc.error(
-            f"{path}.signal",
+            path,
             f"unknown space-trap signal '{signal}'{did_you_mean(signal, SPACE_TRAP_SIGNALS)}; "
             f"known signals: {', '.join(SPACE_TRAP_SIGNALS)}",
         )
-    return SpaceTrap(
-        signal=signal,
-        order=order_value,
-        eps=eps,
-        window_s=window,
-    )
+    return signal
 
 
 def _mapping(doc: YamlDocument, node: Plain, path: str) -> dict[str, Plain]:

@@ -9,12 +9,16 @@ each value's path to its line and column.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from typing import ParamSpec, TypeVar
 
 import yaml
 
 from coral_lang.diagnostics import ProfileError, did_you_mean
+
+_P = ParamSpec("_P")
+_T = TypeVar("_T")
 
 Plain = dict[str, "Plain"] | list["Plain"] | str | int | float | bool | None
 
@@ -170,6 +174,36 @@ def _clip(text: str, width: int = 40) -> str:
     return text if len(text) <= width else text[:width] + "..."
 
 
+class Problems:
+    """The errors found so far while checking a document.
+
+    A checker runs each independent part through `check`: a part that fails records
+    its errors and yields None, and the rest goes on, so one run reports every mistake
+    of a profile, not only the first (`raise_any` raises them together). Parts that
+    depend on a failed one are skipped rather than reported again.
+    """
+
+    def __init__(self) -> None:
+        self.errors: list[ProfileError] = []
+
+    def check(self, part: Callable[_P, _T], /, *args: _P.args, **kwargs: _P.kwargs) -> _T | None:
+        """``part(*args, **kwargs)``, or None with its errors recorded."""
+        try:
+            return part(*args, **kwargs)
+        except ProfileError as exc:
+            self.errors.extend(exc.errors)
+            return None
+
+    def add(self, error: ProfileError) -> None:
+        """Record ``error`` (and those it carries)."""
+        self.errors.extend(error.errors)
+
+    def raise_any(self) -> None:
+        """Raise one `ProfileError` carrying every error recorded, if there is one."""
+        if self.errors:
+            raise ProfileError.collected(self.errors)
+
+
 def expect_keys(
     document: YamlDocument,
     mapping: dict[str, Plain],
@@ -177,13 +211,18 @@ def expect_keys(
     required: Iterable[str],
     optional: Iterable[str],
 ) -> None:
-    """Refuse missing required keys and unknown keys (likely typos) in ``mapping``."""
+    """Refuse missing required keys and unknown keys (likely typos) in ``mapping``,
+    every one of them in one `ProfileError`."""
     required = list(required)
     allowed = set(required) | set(optional)
+    problems = Problems()
     for key in required:
         if key not in mapping:
-            raise document.error(path, f"missing required field '{key}'")
+            problems.add(document.error(path, f"missing required field '{key}'"))
     for key in mapping:
         if key not in allowed:
             child = f"{path}.{key}" if path else key
-            raise document.error(child, f"unknown field '{key}'{did_you_mean(key, allowed)}")
+            problems.add(
+                document.error(child, f"unknown field '{key}'{did_you_mean(key, allowed)}")
+            )
+    problems.raise_any()

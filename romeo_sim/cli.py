@@ -17,26 +17,37 @@ bound.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from coral_lang.cliframe import (
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_USAGE,
+    CommandParser,
+    command_parser,
+    run_main,
+    subcommands,
+)
 from romeo_sim.config import VehicleConfigError, load_vehicle_config
+from runtime.vehicle.options import add_seed_argument, add_serve_arguments
 
 __all__ = ["build_parser", "main"]
 
+VEHICLE_HELP = "vehicle YAML overriding the bundled romeo_vehicle.yaml (docs/sim.md)"
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``romeo-sim``."""
-    parser = argparse.ArgumentParser(
-        prog="romeo-sim",
-        description=(
-            "Simulated ROMEO ROV in a pool: run the paper's pool mission offline, or serve "
-            "the vehicle to a controller on the coral wire protocol."
-        ),
+
+def build_parser() -> CommandParser:
+    """The argument parser of ``romeo-sim``: ``mission`` and ``serve``."""
+    parser = command_parser(
+        "romeo-sim",
+        "Simulated ROMEO ROV in a pool: run the paper's pool mission offline, or serve "
+        "the vehicle to a controller on the coral wire protocol.",
+        epilog="exit codes: 0 the mission completed / a clean stop, 1 the mission did not "
+        "complete / the address cannot be bound, 2 bad usage or input",
     )
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    commands = subcommands(parser)
     mission = commands.add_parser(
         "mission",
         help="run the scripted pool mission and write plots and the run log",
@@ -44,23 +55,14 @@ def build_parser() -> argparse.ArgumentParser:
             "Run the paper's pool mission (go to operating site, way-point navigation, "
             "docking) with a scripted driver, as fast as the CPU allows."
         ),
+        epilog="exit codes: 0 the mission completed, 1 it did not, 2 bad usage or input",
     )
     mission.add_argument(
         "--out", type=Path, default=Path("out/sim"), help="folder for figures and logs"
     )
-    mission.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
-    mission.add_argument(
-        "--vehicle",
-        type=Path,
-        default=None,
-        help="vehicle YAML overriding the bundled romeo_vehicle.yaml",
-    )
+    add_seed_argument(mission, "noise seed")
+    mission.add_argument("--vehicle", type=Path, default=None, metavar="YAML", help=VEHICLE_HELP)
     mission.add_argument("--no-plots", action="store_true", help="write only the run log")
-    _add_serve_parser(commands)
-    return parser
-
-
-def _add_serve_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     serve = commands.add_parser(
         "serve",
         help="serve the simulated vehicle to a controller on the coral wire protocol",
@@ -71,78 +73,27 @@ def _add_serve_parser(commands: argparse._SubParsersAction[argparse.ArgumentPars
             "port the controller announces. Prints 'listening on HOST:PORT' when ready. A "
             "pre-shared key of at least 16 bytes is required."
         ),
+        epilog="exit codes: 0 clean stop, 1 cannot bind the address, 2 bad usage or input",
     )
-    serve.add_argument(
-        "--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)"
-    )
-    serve.add_argument(
-        "--port", type=int, default=0, help="TCP port; 0 lets the system pick one (default 0)"
-    )
-    key = serve.add_mutually_exclusive_group()
-    key.add_argument(
-        "--key-file",
-        type=Path,
-        metavar="FILE",
-        help="file holding the pre-shared key as hex text (white space ignored)",
-    )
-    key.add_argument(
-        "--key-hex",
-        metavar="HEX",
-        help="the pre-shared key as hex on the command line; other users can see it in the "
-        "process list: prefer --key-file",
-    )
-    serve.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
-    serve.add_argument(
-        "--speed",
-        type=float,
-        default=1.0,
-        metavar="FACTOR",
-        help="vehicle clock rate as a multiple of real time (default 1.0)",
-    )
-    serve.add_argument(
-        "--vehicle",
-        type=Path,
-        default=None,
-        help="vehicle YAML overriding the bundled romeo_vehicle.yaml",
-    )
-    serve.add_argument(
-        "--duration",
-        type=float,
-        default=None,
-        metavar="SECONDS",
-        help="stop after this many wall-clock seconds (default: run until Ctrl-C)",
-    )
-    serve.add_argument(
-        "--log",
-        type=Path,
-        metavar="FILE",
-        help="write the vehicle's event log (SQLite) to this new file, created when the "
-        "first controller is adopted; its mission is the wire mission id in decimal",
-    )
+    add_serve_arguments(serve)
+    add_seed_argument(serve, "noise seed")
+    serve.add_argument("--vehicle", type=Path, default=None, metavar="YAML", help=VEHICLE_HELP)
+    return parser
 
 
 def _serve(args: argparse.Namespace) -> int:
-    try:
-        from runtime.keys import KeyProblem, load_psk
+    from runtime.keys import KeyProblem, load_psk
 
+    try:
         key = load_psk(args.key_file, args.key_hex, who="serve")
     except KeyProblem as exc:
         print(f"romeo-sim: {exc}", file=sys.stderr)
-        return 2
-    if not math.isfinite(args.speed) or args.speed <= 0.0:
-        print(f"romeo-sim: --speed must be a positive number, got {args.speed}", file=sys.stderr)
-        return 2
-    if args.duration is not None and (not math.isfinite(args.duration) or args.duration < 0.0):
-        print(f"romeo-sim: --duration must be >= 0 seconds, got {args.duration}", file=sys.stderr)
-        return 2
-    if not 0 <= args.port <= 65535:
-        print(f"romeo-sim: --port must be in 0..65535, got {args.port}", file=sys.stderr)
-        return 2
+        return EXIT_USAGE
     try:
         config = None if args.vehicle is None else load_vehicle_config(args.vehicle)
     except VehicleConfigError as exc:
         print(f"romeo-sim: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_USAGE
     from romeo_sim.vehicle import Vehicle
     from runtime.vehicle.cli import serve_with_log
 
@@ -158,8 +109,11 @@ def _serve(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit code."""
-    args = build_parser().parse_args(argv)
+    """Entry point of ``romeo-sim``; returns the exit code (2 on bad usage)."""
+    return run_main(build_parser(), argv, _dispatch)
+
+
+def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "serve":
         return _serve(args)
     # Imported here so that `romeo-sim --help` stays fast.
@@ -170,10 +124,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         config = None if args.vehicle is None else load_vehicle_config(args.vehicle)
     except VehicleConfigError as exc:
         print(f"romeo-sim: {exc}", file=sys.stderr)
-        return 2
-    result = run_pool_mission(config, seed=args.seed)
+        return EXIT_USAGE
     out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"romeo-sim: cannot write to {out}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_USAGE
+    result = run_pool_mission(config, seed=args.seed)
     written = [result.recorder.write_json(out / "run.json"), *result.recorder.write_csv(out)]
     if not args.no_plots:
         pool = result.vehicle.config.pool
@@ -190,7 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for phase in result.phases:
         print(f"  {phase.name}: {phase.start:.1f}-{phase.end:.1f} s")
     print(f"wrote {len(written)} files to {out}")
-    return 0 if result.completed else 1
+    return EXIT_OK if result.completed else EXIT_FAILED
 
 
 if __name__ == "__main__":

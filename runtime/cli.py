@@ -1,13 +1,17 @@
 """``coral-run``: run a verified mission against a vehicle, and look at what happened.
 
-``coral-run MISSION [--vehicle HOST:PORT | --sim] [--realtime] [--link PROFILE]
+Its commands (argparse subcommands, listed in ``coral-run --help``):
+
+``coral-run run MISSION [--vehicle HOST:PORT | --sim] [--realtime] [--link PROFILE]
 [--profile YAML]`` compiles the mission (against the ``--profile`` vehicle profiles
 before the bundled ones, as ``coral-check`` does), checks its certificate, which must
 cover that profile (``--verify`` verifies and issues one if there is none), runs it,
-writes the event logs to ``--out`` and draws the timeline.
+writes the event logs to ``--out`` and draws the timeline. ``run`` is the default command:
+``coral-run MISSION`` is the same. ``coral-run --resume LOG [...]`` continues the
+mission of a controller that died (``kill -9`` included), from the last state it committed.
 
-``coral-run --resume LOG [...]`` continues the mission of a controller that died
-(``kill -9`` included), from the last state it committed.
+``coral-run fuzz MISSION --runs N --seed S`` runs it under N random schedules against the
+simulator (`runtime.fuzz`).
 
 ``coral-run timeline LOG...`` merges a controller log and a vehicle log and plots them.
 
@@ -20,6 +24,10 @@ itself, with the operator's actions (give an input the mission declares, pause, 
 ``--tui`` shows a live terminal view. ``coral-run operate [HOST:]PORT ACTION [NAME]``
 sends an operator action to such a run (`runtime.operator`; the token comes from the
 run's ``operate.token`` file).
+
+The parser is `coral_lang.cliframe`'s (``--version``, exit 2 on bad usage, returned
+rather than raised); options ``coral-vehicle`` and ``romeo-sim`` share are defined once
+in `runtime.vehicle.options`.
 
 Ctrl-C (SIGINT) and SIGTERM end a run cleanly: no new command is sent, the vehicle is
 asked to make itself safe (``MakeSafe``, acknowledged within a few seconds), the log is
@@ -51,9 +59,28 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     import urllib.error
 
+from coral_lang.cliframe import (
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_USAGE,
+    CommandParser,
+    command_parser,
+    host_port,
+    positive_float,
+    print_error,
+    run_main,
+    subcommands,
+)
 from coral_lang.diagnostics import CoralError
-from runtime.keys import TRUSTED_KEYS_HELP
-from runtime.vehicle.options import add_simulation_arguments, fault_plan_from_args
+from runtime.vehicle.options import (
+    add_include_path_argument,
+    add_key_arguments,
+    add_profile_argument,
+    add_seed_argument,
+    add_simulation_arguments,
+    add_trusted_keys_argument,
+    fault_plan_from_args,
+)
 from runtime.vehicle.sigterm import Terminated, sigterm_raises
 
 if TYPE_CHECKING:
@@ -61,9 +88,20 @@ if TYPE_CHECKING:
     from runtime.run import Companion
     from runtime.watch.feed import LiveFeed
 
-EXIT_OK = 0
-EXIT_MISSION_FAILED = 1
-EXIT_USAGE = 2
+__all__ = [
+    "EXIT_MISSION_FAILED",
+    "EXIT_OK",
+    "EXIT_SIGINT",
+    "EXIT_SIGTERM",
+    "EXIT_USAGE",
+    "OPERATE_TOKEN_FILE",
+    "build_parser",
+    "build_run_parser",
+    "live_companion",
+    "main",
+]
+
+EXIT_MISSION_FAILED = EXIT_FAILED
 EXIT_SIGINT = 128 + signal.SIGINT  # 130
 EXIT_SIGTERM = 128 + signal.SIGTERM  # 143
 
@@ -81,13 +119,6 @@ EXIT_CODES_HELP = (
     "for its acknowledgement), logs and plots are written, and the message gives the "
     "'coral-run --resume LOG' command; a second signal ends at once"
 )
-
-
-def _host_port(text: str) -> tuple[str, int]:
-    host, sep, port = text.rpartition(":")
-    if not sep or not host or not (port.isascii() and port.isdigit()) or not 0 < int(port) < 65536:
-        raise argparse.ArgumentTypeError(f"expected HOST:PORT, got {text!r}")
-    return host, int(port)
 
 
 def _ip_address(text: str) -> str:
@@ -111,36 +142,97 @@ def _ip_address(text: str) -> str:
     return str(address)
 
 
-def _folder(text: str) -> Path:
-    """An existing folder (``--include-path``): a missing one is bad usage at once, not a
-    compile error that blames the mission's include."""
-    path = Path(text)
-    if not path.is_dir():
-        raise argparse.ArgumentTypeError(f"{text}: no such folder")
-    return path
+def _watch_address(text: str) -> tuple[str, int]:
+    """``[HOST:]PORT`` to serve on; port 0 picks a free one, so not `host_port`, which
+    refuses it (`runtime.watch.main.parse_address`)."""
+    from runtime.watch.main import parse_address
 
-
-def _positive(text: str) -> float:
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return value
+        return parse_address(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _served_address(text: str) -> tuple[str, int]:
+    """``[HOST:]PORT`` a run serves on (``coral-run operate``): a bare port is local."""
+    return host_port(text, default_host="127.0.0.1")
+
+
+def build_parser() -> CommandParser:
+    """The parser of ``coral-run`` and its subcommands; ``run`` is the default one
+    (``coral-run MISSION`` is ``coral-run run MISSION``)."""
+    parser = command_parser(
+        "coral-run",
+        "Run a verified CORAL mission against ROMEO (or the simulator) across a real or "
+        "emulated link, logging both sides ('coral-run MISSION' is short for 'coral-run "
+        "run MISSION'), and look at what happened. 'coral-run COMMAND --help' describes "
+        "each command.",
+        epilog=EXIT_CODES_HELP,
+    )
+    commands = subcommands(parser)
+    _add_run_arguments(
+        commands.add_parser(
+            "run",
+            help="run a mission (the default command), or --resume one after a crash",
+            description="Compile the mission, check its certificate (or --verify it), run it "
+            "against the simulator or a --vehicle, write both sides' logs to --out and plot "
+            "them. 'coral-run --resume LOG' continues a run whose controller died.",
+            epilog=EXIT_CODES_HELP,
+        )
+    )
+    _add_fuzz_parser(commands)
+    _add_watch_arguments(
+        commands.add_parser(
+            "watch",
+            help="serve a run's state as a web page (live or replayed), or --tui",
+            description="Serve a mission's state (marking, commands, telemetry, link) as a "
+            "web page from its controller log: live while the mission runs (the log is "
+            "followed until mission-end), a replay with a time scrubber once it has ended.",
+            epilog="exit codes: 0 stopped with Ctrl-C, 2 unreadable log or address. Bound to "
+            "127.0.0.1 by default; any other address (even 127.0.0.2) requires the access "
+            "token printed once in the URL",
+        )
+    )
+    _add_timeline_arguments(
+        commands.add_parser(
+            "timeline",
+            help="merge a controller log and a vehicle log and plot them",
+            description="Merge a controller log and a vehicle log on one time axis (the INIT "
+            "clock offset) and plot the events and the telemetry.",
+            epilog="exit codes: 0 plots written, 2 unreadable or mismatched logs",
+        )
+    )
+    _add_operate_arguments(
+        commands.add_parser(
+            "operate",
+            help="pause, resume or give an input to a run served with --watch",
+            description="Send an operator action to a running mission served with --watch: "
+            "pause (no new command is sent; replies are still consumed), resume, or give NAME "
+            "(an input the mission declares, e.g. abort_requested). Every action is "
+            "authenticated with the run's operate token and logged with its origin.",
+            epilog="exit codes: 0 the action was taken, 1 the run refused it (the message "
+            "says why), 2 bad usage, no token, the token refused, or the run cannot be "
+            f"reached. The token comes from --token-file, else OUT/{OPERATE_TOKEN_FILE} "
+            f"(--out, default out/run), else the environment variable {OPERATE_TOKEN_ENV}",
+        )
+    )
+    return parser
 
 
 def build_run_parser() -> argparse.ArgumentParser:
-    """The parser of ``coral-run MISSION`` / ``coral-run --resume LOG``."""
-    parser = argparse.ArgumentParser(
-        prog="coral-run",
-        description="Run a verified CORAL mission against ROMEO (or the simulator) across "
-        "a real or emulated link, logging both sides. Also: 'coral-run timeline LOG...' "
-        "plots a run's logs; 'coral-run fuzz MISSION --runs N --seed S' runs it under N "
-        "random schedules against the simulator; 'coral-run operate [HOST:]PORT ACTION' "
-        "pauses, resumes or gives an input to a run served with --watch.",
-        epilog=EXIT_CODES_HELP,
-    )
+    """The parser of ``coral-run run`` (``coral-run MISSION`` / ``coral-run --resume LOG``)."""
+    return _subparser(build_parser(), "run")
+
+
+def _subparser(parser: argparse.ArgumentParser, name: str) -> argparse.ArgumentParser:
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            chosen: argparse.ArgumentParser = action.choices[name]
+            return chosen
+    raise LookupError(name)
+
+
+def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("mission", nargs="?", metavar="MISSION", help="mission (.coral)")
     parser.add_argument(
         "--resume",
@@ -150,7 +242,7 @@ def build_run_parser() -> argparse.ArgumentParser:
     )
     where = parser.add_mutually_exclusive_group()
     where.add_argument(
-        "--vehicle", type=_host_port, metavar="HOST:PORT", help="a vehicle serving the protocol"
+        "--vehicle", type=host_port, metavar="HOST:PORT", help="a vehicle serving the protocol"
     )
     where.add_argument(
         "--sim",
@@ -165,7 +257,7 @@ def build_run_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--speed",
-        type=_positive,
+        type=positive_float,
         default=1.0,
         help="with --sim --realtime: simulator seconds per wall second (default 1)",
     )
@@ -176,22 +268,8 @@ def build_run_parser() -> argparse.ArgumentParser:
         help="emulate a link: a built-in profile (ideal, lan, genoa-lisbon, hostile) or a "
         "YAML file (default: genoa-lisbon with the simulator, none with --vehicle)",
     )
-    parser.add_argument(
-        "--profile",
-        action="append",
-        default=[],
-        metavar="YAML",
-        help="vehicle profile to use instead of the bundled one of that name (repeatable)",
-    )
-    parser.add_argument(
-        "--include-path",
-        action="append",
-        default=[],
-        type=_folder,
-        metavar="DIR",
-        help="a folder the mission may include files from besides its own (repeatable; "
-        "recorded in the log, so --resume finds it again)",
-    )
+    add_profile_argument(parser)
+    add_include_path_argument(parser, extra="recorded in the log, so --resume finds it again")
     parser.add_argument(
         "--certificate",
         type=Path,
@@ -205,14 +283,8 @@ def build_run_parser() -> argparse.ArgumentParser:
         "verification (no key needed; the certificate it writes is unsigned, so a later "
         "run needs --verify again or a signed certificate)",
     )
-    parser.add_argument(
-        "--trusted-keys",
-        type=Path,
-        metavar="PATH",
-        help=TRUSTED_KEYS_HELP,
-    )
-    parser.add_argument("--key-file", type=Path, metavar="FILE", help="pre-shared key, hex")
-    parser.add_argument("--key-hex", metavar="HEX", help="pre-shared key (prefer --key-file)")
+    add_trusted_keys_argument(parser)
+    add_key_arguments(parser)
     parser.add_argument(
         "--telemetry-host",
         type=_ip_address,
@@ -224,9 +296,9 @@ def build_run_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--out", type=Path, default=Path("out/run"), help="logs and plots go here (default out/run)"
     )
-    parser.add_argument("--seed", type=int, default=0, help="seed of the simulated run")
+    add_seed_argument(parser, "seed of the simulated run")
     parser.add_argument(
-        "--time-limit", type=_positive, metavar="SECONDS", help="end the run after this long"
+        "--time-limit", type=positive_float, metavar="SECONDS", help="end the run after this long"
     )
     parser.add_argument("--no-plots", action="store_true", help="do not draw the timeline")
     parser.add_argument("-q", "--quiet", action="store_true", help="print the summary only")
@@ -246,74 +318,51 @@ def build_run_parser() -> argparse.ArgumentParser:
         "only: --realtime or --vehicle)",
     )
     add_simulation_arguments(parser)
-    return parser
 
 
-def build_timeline_parser() -> argparse.ArgumentParser:
-    """The parser of ``coral-run timeline``."""
-    parser = argparse.ArgumentParser(
-        prog="coral-run timeline",
-        description="Merge a controller log and a vehicle log on one time axis (the INIT "
-        "clock offset) and plot the events and the telemetry.",
-        epilog="exit codes: 0 plots written, 2 unreadable or mismatched logs",
+def _add_fuzz_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """``coral-run fuzz``: its options and texts are `runtime.fuzz.cli`'s."""
+    from runtime.fuzz.cli import DESCRIPTION, EPILOG, add_fuzz_arguments
+
+    add_fuzz_arguments(
+        commands.add_parser(
+            "fuzz",
+            help="run a mission under many random schedules against the simulator",
+            description=DESCRIPTION,
+            epilog=EPILOG,
+        )
     )
+
+
+def _add_timeline_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("logs", nargs="+", metavar="LOG", type=Path, help="event log (.sqlite)")
     parser.add_argument("--out", type=Path, default=None, help="directory (default: the log's)")
-    return parser
 
 
-def _watch_address(text: str) -> tuple[str, int]:
-    from runtime.watch.main import parse_address
-
-    try:
-        return parse_address(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def build_watch_parser() -> argparse.ArgumentParser:
-    """The parser of ``coral-run watch``."""
-    parser = argparse.ArgumentParser(
-        prog="coral-run watch",
-        description="Serve a mission's state (marking, commands, telemetry, link) as a web "
-        "page from its controller log: live while the mission runs (the log is followed "
-        "until mission-end), a replay with a time scrubber once it has ended.",
-        epilog="exit codes: 0 stopped with Ctrl-C, 2 unreadable log or address. Bound to "
-        "127.0.0.1 by default; any other address (even 127.0.0.2) requires the access "
-        "token printed once in the URL",
-    )
+def _add_watch_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("log", metavar="LOG", type=Path, help="controller log (.sqlite)")
-    parser.add_argument(
+    view = parser.add_mutually_exclusive_group()
+    view.add_argument(
         "--watch",
         metavar="[HOST:]PORT",
         type=_watch_address,
         default=None,
         help="where to serve (default 127.0.0.1:8765; port 0 picks a free one)",
     )
-    parser.add_argument(
+    view.add_argument(
         "--tui",
         action="store_true",
         help="show the mission in this terminal instead of serving a page (follows a live "
         "log until mission-end; Ctrl-C ends it)",
     )
-    return parser
 
 
-def build_operate_parser() -> argparse.ArgumentParser:
-    """The parser of ``coral-run operate``."""
-    parser = argparse.ArgumentParser(
-        prog="coral-run operate",
-        description="Send an operator action to a running mission served with --watch: "
-        "pause (no new command is sent; replies are still consumed), resume, or give NAME "
-        "(an input the mission declares, e.g. abort_requested). Every action is "
-        "authenticated with the run's operate token and logged with its origin.",
-        epilog="exit codes: 0 the action was taken, 1 the run refused it (the message says "
-        "why), 2 bad usage, no token, the token refused, or the run cannot be reached. "
-        f"The token comes from --token-file, else OUT/{OPERATE_TOKEN_FILE} (--out, default "
-        f"out/run), else the environment variable {OPERATE_TOKEN_ENV}",
-    )
+def _add_operate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "address", metavar="[HOST:]PORT", type=_watch_address, help="where the run serves"
+        "address",
+        metavar="[HOST:]PORT",
+        type=_served_address,
+        help="where the run serves (a bare PORT: 127.0.0.1)",
     )
     parser.add_argument("action", choices=["pause", "resume", "give"], help="the action")
     parser.add_argument("name", nargs="?", metavar="NAME", help="with give: the input")
@@ -324,44 +373,70 @@ def build_operate_parser() -> argparse.ArgumentParser:
         default=Path("out/run"),
         help=f"the run's --out folder, holding {OPERATE_TOKEN_FILE} (default out/run)",
     )
-    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``coral-run``."""
+    """Entry point of ``coral-run``; returns the exit code (2 on bad usage, never raises
+    ``SystemExit``)."""
+    parser = build_parser()
     args = list(sys.argv[1:] if argv is None else argv)
-    if args and args[0] == "timeline":
-        return _timeline(build_timeline_parser().parse_args(args[1:]))
-    if args and args[0] == "watch":
-        return _watch(build_watch_parser().parse_args(args[1:]))
-    if args and args[0] == "operate":
-        return _operate(build_operate_parser().parse_args(args[1:]))
-    if args and args[0] == "fuzz":
-        from runtime.fuzz import main as fuzz_main
+    if not args:  # what a newcomer types first: say what to give, not "required: command"
+        return _usage_error(parser, "give a MISSION to run, or --resume LOG")
+    return run_main(parser, args, lambda args: _dispatch(parser, args), default_command="run")
 
-        return fuzz_main(args[1:])
-    parser = build_run_parser()
-    options = parser.parse_args(args)
+
+def _dispatch(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    if args.command == "timeline":
+        return _timeline(args)
+    if args.command == "watch":
+        return _watch(args)
+    if args.command == "operate":
+        if args.action == "give" and not args.name:
+            return _usage_error(_subparser(parser, "operate"), "give needs the NAME of an input")
+        if args.action != "give" and args.name:
+            return _usage_error(_subparser(parser, "operate"), f"{args.action} takes no NAME")
+        return _operate(args)
+    if args.command == "fuzz":
+        from runtime.fuzz.cli import run_fuzz
+
+        return run_fuzz(args)
+    return _run_command(_subparser(parser, "run"), args)
+
+
+def _usage_error(parser: argparse.ArgumentParser, message: str) -> int:
+    """What ``parser.error`` prints, returned as exit 2 rather than raised: for the
+    checks across options that argparse cannot express."""
+    parser.print_usage(sys.stderr)
+    print_error(parser.prog, message)
+    return EXIT_USAGE
+
+
+def _usage_problem(options: argparse.Namespace) -> str | None:
+    """Why these ``run`` options do not go together, or None."""
     if options.mission is None and options.resume is None:
-        parser.error("give a MISSION to run, or --resume LOG")
+        return "give a MISSION to run, or --resume LOG"
     if options.realtime and options.vehicle is not None:
-        parser.error("--realtime applies to the simulator; a --vehicle always runs in real time")
+        return "--realtime applies to the simulator; a --vehicle always runs in real time"
     if options.vehicle is not None and (
         options.fault or options.faults or options.simulator or options.sim_config
     ):
-        parser.error(
+        return (
             "--simulator, --sim-config, --fault and --faults shape a simulated vehicle; "
             "a --vehicle is a real one"
         )
     if options.speed != 1.0 and not options.realtime:
-        parser.error("--speed applies to a simulator in real time: add --realtime")
+        return "--speed applies to a simulator in real time: add --realtime"
     for flag, given in (("--watch", options.watch is not None), ("--tui", options.tui)):
         if given and not options.realtime and options.vehicle is None:
-            print(
-                f"coral-run: {flag} needs a run in real time: add --realtime (or --vehicle)",
-                file=sys.stderr,
-            )
-            return EXIT_USAGE
+            return f"{flag} needs a run in real time: add --realtime (or --vehicle)"
+    return None
+
+
+def _run_command(parser: argparse.ArgumentParser, options: argparse.Namespace) -> int:
+    """``coral-run run``: the checks across options, then the run with its exit code."""
+    problem = _usage_problem(options)
+    if problem is not None:
+        return _usage_error(parser, problem)
     from runtime.engine import EngineSpin
 
     try:
@@ -620,9 +695,6 @@ def _timeline(options: argparse.Namespace) -> int:
 
 def _watch(options: argparse.Namespace) -> int:
     if options.tui:
-        if options.watch is not None:
-            print("coral-run watch: give --watch or --tui, not both", file=sys.stderr)
-            return EXIT_USAGE
         from runtime.tui import watch_log_tui
 
         try:
@@ -775,15 +847,6 @@ def _operate(options: argparse.Namespace) -> int:
 
     host, port = options.address
     where = f"{host}:{port}"
-    if options.action == "give" and not options.name:
-        print("coral-run operate: give needs the NAME of an input", file=sys.stderr)
-        return EXIT_USAGE
-    if options.action != "give" and options.name:
-        print(f"coral-run operate: {options.action} takes no NAME", file=sys.stderr)
-        return EXIT_USAGE
-    if port == 0:
-        print("coral-run operate: give the port the run serves on, not 0", file=sys.stderr)
-        return EXIT_USAGE
     token = _operate_token(options, os.environ)
     if token is not None and not (token.isascii() and token.isprintable() and " " not in token):
         token = "coral-run operate: the operate token holds characters no token has"

@@ -28,6 +28,7 @@ from __future__ import annotations
 import enum
 import heapq
 import random
+import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
@@ -381,10 +382,11 @@ class Engine:
             )
         digest = net.digest()
         if approval.net_digest != digest:
+            mission = "MISSION" if approval.mission is None else shlex.quote(approval.mission)
             raise EngineError(
                 f"certificate {approval.path} was issued for net {approval.net_digest}, not "
-                f"for this one ({digest}); run 'coral-check verify MISSION --certificate FILE' "
-                "on the mission as it is now"
+                f"for this one ({digest}); run 'coral-check verify {mission} --certificate "
+                f"{shlex.quote(approval.path)}' on the mission as it is now"
             )
         self.net = net
         self.digest = digest

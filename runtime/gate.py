@@ -27,6 +27,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from analysis.certificate import (
     CertificateCheck,
@@ -37,9 +38,13 @@ from analysis.certificate import (
     write_certificate,
 )
 from analysis.signing import SigningKey, TrustStore, resolve_trust_store, sign_certificate
+from coral_lang.diagnostics import CompileError
 from coral_lang.mission import Mission, load_mission
 from coral_lang.net import Net
 from coral_lang.profile import VehicleProfile
+
+if TYPE_CHECKING:
+    from analysis.report import Report
 
 __all__ = [
     "ApprovedMission",
@@ -116,6 +121,7 @@ def check_mission_certificate(
         certificate,
         profile_content=mission.profile_content(),
         trusted=trust_store() if trusted is None else trusted,
+        mission=mission.path,
     )
 
 
@@ -153,9 +159,7 @@ def approve_mission(
     except CertificateError:
         if not issue:
             raise
-    from analysis.verify import verify  # only when verifying: it loads the solvers
-
-    report = verify(compiled.net)
+    compiled, report = _verify(path, compiled, profiles, include_path)
     certificate_data = make_certificate(report, profile_content=compiled.profile_content())
     if certificate_data["verdict"] != "proven":
         failing = ", ".join(
@@ -179,6 +183,44 @@ def approve_mission(
         str(cert_path),
         profile_content=compiled.profile_content(),
         trusted=TrustStore.of([own_key.public], "this process's own verification"),
+        mission=path,
     )
     write_certificate(certificate_data, cert_path)
     return ApprovedMission(compiled, approval, True)
+
+
+def _verify(
+    path: Path,
+    compiled: Mission,
+    profiles: Sequence[VehicleProfile],
+    include_path: Sequence[str | Path],
+) -> tuple[Mission, Report]:
+    """Verify the mission through the one check pipeline (`analysis.pipeline`), as
+    ``coral-check verify`` does, so both reach the same verdict on the same file.
+
+    Returns the mission as the pipeline compiled it (the net the report is about) and
+    the report. Only the verdicts decide: lint findings are ``coral-check``'s business.
+
+    Raises:
+        CompileError: the file no longer compiles (it changed since ``compiled``).
+    """
+    from analysis.pipeline import CheckOptions, check_file  # loads the solvers
+    from analysis.verify import VerifyOptions
+
+    outcome = check_file(path, CheckOptions(profiles, include_path, verify=VerifyOptions()))
+    result = outcome.result
+    if result is None or outcome.report is None:
+        if result is not None and result.errors:
+            raise CompileError(result.errors, result.sources)
+        return compiled, _verify_net(compiled)
+    mission = Mission.from_result(result, path, profiles, include_path)
+    return mission, outcome.report
+
+
+def _verify_net(compiled: Mission) -> Report:
+    """The report on the net already compiled, when the pipeline gave none: the file
+    became unreadable since, or it is a part of a mission (which the pipeline checks
+    without verifying)."""
+    from analysis.verify import verify
+
+    return verify(compiled.net)

@@ -41,7 +41,8 @@ from runtime.engine import Engine, Policy
 from runtime.eventlog import EventLog, EventLogError, log_key
 from runtime.faultplan import FaultPlan
 from runtime.gate import ApprovedMission
-from runtime.link import Link, LinkEmulator, LinkProfile, MemoryLink, SocketLink
+from runtime.link import Link, LinkEmulator, LinkProfile, SocketLink
+from runtime.simvehicle import VehicleSpec, serve_simulated
 from runtime.vclock import run_virtual
 from runtime.vehicle.model import VehicleModel
 
@@ -145,9 +146,10 @@ def _simulated_vehicle(mission: ApprovedMission, config: RunConfig) -> VehicleMo
     """The simulated vehicle of the run, None when it runs against a real one.
 
     Built before any log is written, so a simulator or fault plan that cannot be used is
-    reported as bad input and leaves nothing behind.
+    reported as bad input and leaves nothing behind. `VehicleSpec` is the same builder
+    ``coral-run fuzz`` uses, so the options mean the same in both.
     """
-    from runtime.vehicle.registry import SimulatorError, create_vehicle
+    from runtime.vehicle.registry import SimulatorError
 
     if config.vehicle is not None:
         if config.faults is not None:
@@ -159,13 +161,8 @@ def _simulated_vehicle(mission: ApprovedMission, config: RunConfig) -> VehicleMo
         raise SimulatorError(
             f"{mission.path}: no vehicle profile to simulate '{mission.net.vehicle}' with"
         )
-    return create_vehicle(
-        profile,
-        simulator=config.simulator,
-        seed=config.seed,
-        config=config.sim_config,
-        faults=config.faults,
-    )
+    spec = VehicleSpec(profile, config.simulator, config.sim_config, config.faults)
+    return spec.build(config.seed)
 
 
 def run_mission(mission: ApprovedMission, config: RunConfig) -> RunResult:
@@ -471,8 +468,6 @@ async def _simulated(
     *,
     sockets: bool,
 ) -> RunResult:
-    from runtime.vehicle.server import VehicleServer
-
     loop = asyncio.get_running_loop()
     vehicle_rng = random.Random(rng.getrandbits(64))
     controller_rng = random.Random(rng.getrandbits(64))
@@ -484,27 +479,19 @@ async def _simulated(
         meta={"seed": config.seed, "speed": config.speed if sockets else 1.0},
         mac_key=_log_key(config),
     )
-    server = VehicleServer(
-        model,
-        config.psk,
-        clock=loop.time,
-        speed=config.speed if sockets else 1.0,
-        nonces=vehicle_rng.randbytes,
-        log=lambda line: config.console(f"  vehicle: {line}"),
-        event_log=vehicle_log,
-    )
-    link: Link
     try:
-        if sockets:
-            host, port = await server.start()
-            link = SocketLink(host, port, _emulator(config), log=config.console)
-        else:
-            link = MemoryLink(server, _emulator(config), log=config.console)
-        try:
+        async with serve_simulated(
+            model,
+            config.psk,
+            _emulator(config),
+            nonces=vehicle_rng.randbytes,
+            sockets=sockets,
+            speed=config.speed if sockets else 1.0,
+            log=lambda line: config.console(f"  vehicle: {line}"),
+            link_log=config.console,
+            event_log=vehicle_log,
+        ) as (_, link):
             controller = make(link, loop.time(), controller_rng.randbytes)
             return await _run_controller(config, controller)
-        finally:
-            await link.aclose()
     finally:
-        await server.stop()
         vehicle_log.close()

@@ -62,13 +62,21 @@ def test_every_documented_command_line_parses(block: str) -> None:
             assert (REPO / file).is_file(), f"{command}: no {file} in this repository"
 
 
-def test_the_hook_runs_lint_on_missions_through_a_real_console_script() -> None:
-    (hook,) = yaml.safe_load(HOOKS.read_text())
-    assert hook["id"] == "coral-check" and hook["language"] == "python"
-    assert hook["entry"] == "coral-check lint"
+@pytest.mark.parametrize(
+    ("hook_id", "entry"),
+    [("coral-check", "coral-check lint"), ("coral-check-fmt", "coral-check fmt --check")],
+)
+def test_each_hook_runs_on_missions_through_a_real_console_script(hook_id: str, entry: str) -> None:
+    hooks = {hook["id"]: hook for hook in yaml.safe_load(HOOKS.read_text())}
+    hook = hooks[hook_id]
+    assert hook["language"] == "python" and hook["entry"] == entry
     pattern = re.compile(hook["files"])
     assert pattern.search("missions/pool.coral") and not pattern.search("pool.coral.bak")
     scripts = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["scripts"]
-    module, _, function = scripts[hook["entry"].split()[0]].partition(":")
+    module, _, function = scripts[entry.split()[0]].partition(":")
     assert callable(getattr(importlib.import_module(module), function))
-    assert hook["entry"].split()[1] == "lint"
+    # The entry's arguments (plus a file, as pre-commit adds them) parse as a command.
+    from analysis.cli import build_parser
+
+    args = build_parser().parse_args([*entry.split()[1:], "missions/pool.coral"])
+    assert args.command == entry.split()[1]

@@ -14,6 +14,8 @@ from analysis.certificate import check_certificate, make_certificate, write_cert
 from analysis.report import Step, Verdict
 from analysis.verify import VerifyOptions, verify
 from coral_lang.compiler import compile_file, compile_mission
+from coral_lang.formatting import format_source
+from coral_lang.loading import load_net_file
 from coral_lang.net import Net, PlaceKind
 from coral_lang.profile import load_profile
 from tests.analysis.reference import explore_reference
@@ -208,3 +210,31 @@ def test_survey_auv_mission_verifies_clean_against_its_profile(tmp_path: Path) -
     path = tmp_path / "survey.cert.json"
     write_certificate(make_certificate(report), path)
     assert check_certificate(net, path).net_digest == net.digest()
+
+
+def test_every_example_file_loads_and_every_part_says_which_mission_it_belongs_to() -> None:
+    """``coral-check examples/pool_mission/*.coral`` passes: a phase file is checked as
+    the mission it is a part of (its header), never alone (docs/language.md)."""
+    minnow = load_profile(EXAMPLES / "profiles" / "minnow.yaml")
+    parts = 0
+    for path in sorted(EXAMPLES.glob("*/*.coral")):
+        if path.parent == FAULTY:
+            continue
+        result = load_net_file(path, [minnow])
+        assert result.ok, [d.render(result.sources) for d in result.errors]
+        is_mission = path.read_text().find("\nmission ") >= 0
+        assert (result.part_of is None) == is_mission, path
+        if result.part_of is not None:
+            parts += 1
+            assert result.part_path == path and result.part_of.exists()
+    assert parts == 5  # the pool mission's four phases and the operator's abort path
+
+
+@pytest.mark.parametrize(
+    "path", sorted(EXAMPLES.rglob("*.coral")), ids=lambda p: str(p.relative_to(EXAMPLES))
+)
+def test_every_example_is_in_canonical_layout(path: Path) -> None:
+    # docs/ci.md runs `coral-check fmt --check` on the examples, and so does the
+    # pre-commit hook: the repository's own missions must pass it
+    text = path.read_text()
+    assert format_source(text, str(path)) == text, f"run: coral-check fmt {path}"

@@ -15,43 +15,39 @@ already exists).
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from coral_lang.cliframe import (
+    EXIT_FAILED,
+    EXIT_OK,
+    EXIT_USAGE,
+    CommandParser,
+    command_parser,
+    run_main,
+    subcommands,
+)
 from coral_lang.diagnostics import CoralError
 from coral_lang.profile import VehicleProfile, load_bundled_profile, load_profile
 from runtime.vehicle.model import VehicleModel
-from runtime.vehicle.options import add_simulation_arguments, fault_plan_from_args
+from runtime.vehicle.options import (
+    LOG_HELP,
+    add_seed_argument,
+    add_serve_arguments,
+    add_simulation_arguments,
+    fault_plan_from_args,
+)
 
 if TYPE_CHECKING:
     from runtime.eventlog import EventLog
 
 __all__ = ["LOG_HELP", "VehicleLogFile", "build_parser", "main"]
 
-LOG_HELP = (
-    "write the vehicle's event log (SQLite) to this new file, created when the first "
-    "controller is adopted; its mission is the wire mission id in decimal"
-)
-"""The help of ``--log``, the same on ``coral-vehicle serve`` and ``romeo-sim serve``."""
-
-EXIT_OK = 0
-EXIT_BIND = 1
-EXIT_USAGE = 2
-
-
-def _finite(text: str, *, positive: bool) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value) or value < 0.0 or (positive and value == 0.0):
-        kind = "positive" if positive else "non-negative"
-        raise argparse.ArgumentTypeError(f"expected a {kind} number, got {text!r}")
-    return value
+EXIT_BIND = EXIT_FAILED
+"""The address cannot be bound (`runtime.vehicle.server.run_vehicle`'s 1)."""
 
 
 class VehicleLogFile:
@@ -112,58 +108,33 @@ class VehicleLogFile:
             self.log.close()
 
 
-def _port(text: str) -> int:
-    if not (text.isascii() and text.isdigit()) or not 0 <= int(text) <= 65535:
-        raise argparse.ArgumentTypeError(f"expected a port in 0..65535, got {text!r}")
-    return int(text)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``coral-vehicle``."""
-    parser = argparse.ArgumentParser(
-        prog="coral-vehicle",
-        description="Serve a simulated vehicle for any vehicle profile on the coral wire "
-        "protocol, with faults on request, so a mission can be rehearsed over real sockets.",
+def build_parser() -> CommandParser:
+    """The argument parser of ``coral-vehicle``: ``list`` and ``serve``."""
+    parser = command_parser(
+        "coral-vehicle",
+        "Serve a simulated vehicle for any vehicle profile on the coral wire protocol, "
+        "with faults on request, so a mission can be rehearsed over real sockets.",
         epilog="exit codes: 0 clean stop, 1 cannot bind the address, 2 bad usage or input",
     )
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    commands.add_parser("list", help="list the registered simulators")
+    commands = subcommands(parser)
+    commands.add_parser(
+        "list",
+        help="list the registered simulators",
+        description="List the registered simulators: NAME and where it is implemented.",
+    )
     serve = commands.add_parser(
         "serve",
         help="serve a simulated vehicle to a controller",
         description="Serve a simulated vehicle on TCP (handshake, commands, replies; one "
         "controller at a time, a reconnecting one resumes its mission) and UDP telemetry. "
         "Prints 'listening on HOST:PORT' when ready.",
+        epilog="exit codes: 0 clean stop, 1 cannot bind the address, 2 bad usage or input",
     )
     which = serve.add_mutually_exclusive_group(required=True)
     which.add_argument("--profile", type=Path, metavar="FILE", help="the vehicle profile (YAML)")
     which.add_argument("--vehicle", metavar="NAME", help="a bundled profile by name (ROMEO)")
-    serve.add_argument("--host", default="127.0.0.1", help="address to listen on (127.0.0.1)")
-    serve.add_argument("--port", type=_port, default=0, help="TCP port; 0 picks one (default)")
-    key = serve.add_mutually_exclusive_group()
-    key.add_argument("--key-file", type=Path, metavar="FILE", help="pre-shared key, hex text")
-    key.add_argument(
-        "--key-hex",
-        metavar="HEX",
-        help="pre-shared key on the command line; other users can see it in the process "
-        "list: prefer --key-file",
-    )
-    serve.add_argument("--seed", type=int, default=0, help="seed of the simulated vehicle")
-    serve.add_argument(
-        "--speed",
-        type=lambda t: _finite(t, positive=True),
-        default=1.0,
-        metavar="FACTOR",
-        help="vehicle seconds per wall second (default 1)",
-    )
-    serve.add_argument(
-        "--duration",
-        type=lambda t: _finite(t, positive=False),
-        default=None,
-        metavar="SECONDS",
-        help="stop after this many wall seconds (default: until Ctrl-C)",
-    )
-    serve.add_argument("--log", type=Path, metavar="FILE", help=LOG_HELP)
+    add_serve_arguments(serve)
+    add_seed_argument(serve, "seed of the simulated vehicle")
     add_simulation_arguments(serve)
     return parser
 
@@ -175,15 +146,14 @@ def _profile(args: argparse.Namespace) -> VehicleProfile:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit code."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:
-        return EXIT_OK if exc.code == 0 else EXIT_USAGE
-    from runtime.vehicle.registry import simulators
+    """Entry point of ``coral-vehicle``; returns the exit code (2 on bad usage)."""
+    return run_main(build_parser(), argv, _dispatch)
 
+
+def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "list":
+        from runtime.vehicle.registry import simulators
+
         for name, target in sorted(simulators().items()):
             print(f"{name:10} {target}")
         return EXIT_OK
@@ -228,7 +198,9 @@ def serve_with_log(
 ) -> int:
     """`runtime.vehicle.server.run_vehicle` as a ``serve`` command runs it: with the
     vehicle's own authenticated log when ``args.log`` names one (a `VehicleLogFile` with
-    ``meta``), closed after serving; an existing log file is exit 2, before serving.
+    ``meta``), closed after serving; an existing log file is exit 2, before serving, and
+    so is a log that cannot take its last commit, after serving (as a controller whose
+    log fails).
 
     ``args`` holds the ``serve`` options both ``coral-vehicle`` and ``romeo-sim`` have:
     ``log``, ``host``, ``port``, ``speed``, ``duration``.
@@ -243,8 +215,9 @@ def serve_with_log(
         except CoralError as exc:
             log(str(exc))
             return EXIT_USAGE
+    closed = True
     try:
-        return run_vehicle(
+        code = run_vehicle(
             model,
             key,
             host=args.host,
@@ -256,7 +229,19 @@ def serve_with_log(
         )
     finally:
         if event_log is not None:
-            event_log.close()
+            closed = _close_log(event_log, log)
+    return code if closed else EXIT_USAGE
+
+
+def _close_log(event_log: VehicleLogFile, log: Callable[[str], None]) -> bool:
+    """Close the vehicle's log; a log that cannot take its last commit (a full disk, the
+    file changed under it) is said in one line, not a traceback. False then."""
+    try:
+        event_log.close()
+    except CoralError as exc:
+        log(f"the vehicle log was not closed cleanly: {exc}")
+        return False
+    return True
 
 
 if __name__ == "__main__":

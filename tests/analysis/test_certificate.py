@@ -15,9 +15,11 @@ from analysis.certificate import (
     write_certificate,
 )
 from analysis.cli import main
+from analysis.signing import TrustStore
 from analysis.verify import VerifyOptions, verify
 from coral_lang import Mission, compile_mission, compile_source, load_mission, load_profile
 from coral_lang.mission import profile_content
+from coral_lang.net import Net
 from coral_lang.profile import VehicleProfile
 from tests.conftest import EXAMPLES
 
@@ -318,3 +320,55 @@ def test_cli_certificate_covers_the_given_profile(
     mission = load_mission(survey, [load_profile(minnow)])
     accepted = check_certificate(mission.net, path, profile_content=mission.profile_content())
     assert accepted.profile_digest == section["digest"]
+
+
+# -- the way out names the files -------------------------------------------------------------
+
+SMALL = (
+    "mission m\nvehicle ROMEO\nplace a = 1, b, c\nfinal { b }\nfinal { c }\n"
+    "transition t wait { a } action { ROMEO(DEPTH, z = 2.0) -> { ack: b, error: c } }\n"
+)
+
+
+def _unsigned(tmp_path: Path) -> tuple[Net, Path]:
+    """A passing, unsigned certificate for `SMALL`, in a folder whose name needs quoting."""
+    net = compile_source(SMALL, "m.coral").raise_for_errors()
+    folder = tmp_path / "my certs"
+    folder.mkdir()
+    path = folder / "m.cert.json"
+    write_certificate(make_certificate(verify(net, VerifyOptions(structural=False))), path)
+    return net, path
+
+
+def test_an_unsigned_certificate_names_the_mission_and_certificate_to_verify(
+    tmp_path: Path,
+) -> None:
+    net, path = _unsigned(tmp_path)
+    nobody = TrustStore.of([], "test")
+    with pytest.raises(CertificateError, match="is not signed") as refused:
+        check_certificate(net, path, trusted=nobody, mission="missions/dive 1.coral")
+    message = str(refused.value)
+    assert (
+        f"'coral-check verify 'missions/dive 1.coral' --certificate '{path}' --signing-key KEY'"
+        in message
+    )
+    assert "'coral-run 'missions/dive 1.coral' --verify'" in message
+    with pytest.raises(CertificateError) as generic:  # a caller that does not know it
+        check_certificate(net, path, trusted=nobody)
+    assert f"'coral-check verify MISSION --certificate '{path}' --signing-key KEY'" in str(
+        generic.value
+    )
+    assert "'coral-run MISSION --verify'" in str(generic.value)
+
+
+def test_every_refusal_names_the_mission_when_the_caller_knows_it(tmp_path: Path) -> None:
+    net, path = _unsigned(tmp_path)
+    changed = compile_source(SMALL.replace("2.0", "3.0"), "m.coral").raise_for_errors()
+    with pytest.raises(CertificateError, match="changed since it was verified") as refused:
+        check_certificate(changed, path, mission=Path("m.coral"))
+    assert f"run 'coral-check verify m.coral --certificate '{path}' --signing-key KEY'" in str(
+        refused.value
+    )
+    accepted = check_certificate(net, path, mission=Path("m.coral"))
+    assert accepted.mission == "m.coral"  # the engine's refusals name it too
+    assert check_certificate(net, path).mission is None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import pty
@@ -47,19 +48,30 @@ def wide(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 @pytest.mark.usefixtures("wide")
-def test_help_names_formats_subcommands_and_exit_codes(capsys: pytest.CaptureFixture[str]) -> None:
+def test_help_lists_the_subcommands_in_the_usage_line_and_the_exit_codes(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     assert main(["--help"]) == 0
     out = capsys.readouterr().out
-    assert out.startswith("usage: coral-check [-h]")
-    for text in (
-        "coral-check lint FILE",
-        "coral-check verify FILE",
-        "--format {text,json,sarif,html}",
-    ):
-        assert text in out
-    assert "--color {auto,always,never}" in out and "NO_COLOR" in out
+    usage = out.splitlines()[0]
+    assert usage == (
+        "usage: coral-check [-h] [--version] {check,lint,verify,fmt,export,keygen,resign,query} ..."
+    )
+    assert "coral-check --explain CODE" in out and "coral.toml" in out
     assert "exit codes: 0 clean" in out and "2 > 1 > 3 > 0" in out
     assert build_parser().prog == "coral-check"
+    assert main(["check", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: coral-check check [-h]")
+    assert "--format {text,json,sarif,html}" in out and "--select CODES" in out
+    assert "--color {auto,always,never}" in out and "NO_COLOR" in out
+
+
+def test_version_on_the_command_and_its_subcommands_is_the_package_s(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["--version"]) == 0
+    assert re.fullmatch(r"coral-check \(coral \S+\)\n", capsys.readouterr().out)
 
 
 @pytest.mark.usefixtures("wide")
@@ -154,6 +166,7 @@ def test_bad_profile_exits_2_naming_the_field(
     assert "commands.DEPTH.kind" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_worst_exit_code_wins_in_the_order_2_1_3_0(chain: str, tmp_path: Path) -> None:
     missing = str(tmp_path / "missing.coral")
     assert main([POOL, UNHANDLED]) == 1
@@ -200,7 +213,7 @@ def test_json_document_is_one_versioned_object_per_run(
     assert main([*files, "--format", "json", "-o", str(out)]) == 2
     assert capsys.readouterr().out == ""
     data = json.loads(out.read_text())
-    assert data["schema"] == "coral-check" and data["schema_version"] == JSON_SCHEMA_VERSION == 1
+    assert data["schema"] == "coral-check" and data["schema_version"] == JSON_SCHEMA_VERSION
     assert data["tool"]["name"] == "coral-check" and data["tool"]["version"]
     assert data["command"] == "check" and data["exit_code"] == 2
     assert [f["file"] for f in data["files"]] == files
@@ -268,6 +281,7 @@ def _run_in_a_terminal(args: list[str], env: dict[str, str]) -> str:
     return b"".join(chunks).decode()
 
 
+@pytest.mark.slow
 def test_colour_on_a_terminal_unless_no_color() -> None:
     env = {k: v for k, v in os.environ.items() if k not in ("NO_COLOR", "TERM")}
     env["TERM"] = "xterm"
@@ -295,6 +309,7 @@ def test_verify_subcommand_keeps_its_report_and_lints_on_stderr(
 # -- start-up cost ----------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_heavy_modules_load_only_when_needed() -> None:
     """z3, the PNML reader (XML) and matplotlib stay out of a lint-and-verify run of a
     mission: they cost start-up time that a pre-commit hook pays on every commit."""
@@ -312,6 +327,7 @@ def test_heavy_modules_load_only_when_needed() -> None:
     assert out.strip() == "0 []"
 
 
+@pytest.mark.slow
 def test_a_closed_pipe_ends_quietly() -> None:
     """`coral-check ... | head -1`: no traceback when the reader goes away."""
     with subprocess.Popen(
@@ -373,3 +389,247 @@ def test_a_refused_input_file_exits_2_with_the_reason(
             reason = "is a folder without model.pnml"  # query also takes an MCC folder
         assert reason in err and file in err, err
         assert "Traceback" not in err
+
+
+# -- one parser: subcommands, the shorthand, usage errors ---------------------------------
+
+
+def test_the_shorthand_is_the_check_subcommand(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([POOL, "--format", "json"]) == 0
+    shorthand = json.loads(capsys.readouterr().out)
+    assert main(["check", POOL, "--format", "json"]) == 0
+    explicit = json.loads(capsys.readouterr().out)
+    assert shorthand["command"] == explicit["command"] == "check"
+    for key in ("file", "status", "diagnostics"):
+        assert shorthand["files"][0][key] == explicit["files"][0][key]
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        [],
+        ["check"],
+        ["verify"],
+        ["verify", POOL, POOL],
+        ["fmt"],
+        ["export", POOL],
+        ["keygen"],
+        ["resign"],
+        ["query"],
+        ["--bogus"],
+        ["lint", POOL, "--select", "CORAL999"],
+        ["lint", POOL, "--ignore", ","],
+        ["lint", POOL, "--config", "x.toml", "--no-config"],
+        ["verify", POOL, "--por", "--max-edges", "-3"],
+        ["fmt", POOL, "--check", "--diff"],
+        ["query", POOL, "--examination", "Nope"],
+        ["query", POOL, "-o", "/no/such/folder/x"],
+    ],
+)
+def test_every_usage_error_returns_2_and_never_raises(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "error:" in err and "Traceback" not in err
+
+
+def test_include_path_is_checked_once_by_its_type(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for command in ("check", "lint", "verify", "export"):
+        assert main([command, POOL, "--include-path", str(tmp_path / "nowhere")]) == 2
+        err = capsys.readouterr().err
+        assert f"argument --include-path: {tmp_path / 'nowhere'}: no such folder" in err
+
+
+# -- --select / --ignore ----------------------------------------------------------------
+
+
+def _codes(capsys: pytest.CaptureFixture[str], *argv: str) -> set[str]:
+    assert main(["lint", "--format", "json", "--no-config", *argv]) == 0
+    data = json.loads(capsys.readouterr().out)
+    return {d["code"] for f in data["files"] for d in f["diagnostics"]}
+
+
+def test_select_and_ignore_take_codes_and_prefixes(capsys: pytest.CaptureFixture[str]) -> None:
+    dead = str(FAULTY / "dead_transition.coral")
+    assert _codes(capsys, dead) == {"CORAL204", "CORAL205"}
+    assert _codes(capsys, dead, "--ignore", "CORAL204") == {"CORAL205"}
+    assert _codes(capsys, dead, "--select", "coral204") == {"CORAL204"}
+    assert _codes(capsys, dead, "--select", "CORAL2", "--ignore", "CORAL205") == {"CORAL204"}
+    assert _codes(capsys, dead, "--ignore", "CORAL204,CORAL205") == set()
+    assert _codes(capsys, dead, "--ignore", "CORAL204", "--ignore", "CORAL205") == set()
+
+
+def test_an_unknown_code_is_named_with_the_known_ones(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["lint", POOL, "--ignore", "CORAL204,CORAL2O4"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown rule code CORAL2O4 (known: CORAL001" in err and "CORAL209" in err
+
+
+def test_compile_errors_are_never_ignored(capsys: pytest.CaptureFixture[str]) -> None:
+    # 'CORAL' names every lint rule too, so it is accepted; the compile error stays.
+    assert main(["lint", UNHANDLED, "--ignore", "CORAL"]) == 1
+    assert "[CORAL106]" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "option", [["--ignore", "CORAL001"], ["--select", "CORAL0"], ["--ignore", "CORAL1,CORAL204"]]
+)
+def test_a_selector_of_compile_codes_only_is_refused(
+    capsys: pytest.CaptureFixture[str], option: list[str]
+) -> None:
+    assert main(["lint", UNHANDLED, *option]) == 2
+    err = capsys.readouterr().err
+    assert "compile errors cannot be selected or ignored" in err
+    assert "lint codes: CORAL201" in err and "CORAL209" in err
+
+
+# -- standard input ---------------------------------------------------------------------
+
+
+def test_a_dash_reads_the_mission_from_standard_input(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr("sys.stdin", io.StringIO(CHAIN))
+    assert main(["lint", "-", "--format", "json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["files"][0]["file"] == "<stdin>" and data["files"][0]["status"] == "clean"
+    monkeypatch.setattr("sys.stdin", io.StringIO(Path(UNHANDLED).read_text()))
+    assert main(["-"]) == 1
+    assert "<stdin>:20:20: error:" in capsys.readouterr().out
+    assert main(["lint", "-", "-"]) == 2
+    assert "'-' (standard input) can be given only once" in capsys.readouterr().err
+
+
+def test_verify_reads_standard_input_too(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr("sys.stdin", io.StringIO(CHAIN))
+    assert main(["verify", "-", "--max-states", "3", "--no-structure"]) == 3
+    assert "INCONCLUSIVE" in capsys.readouterr().out
+
+
+# -- verify's JSON is the one document ----------------------------------------------------
+
+
+def test_verify_json_is_the_one_document_with_command_verify(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["verify", DEADLOCK, "--format", "json", "--no-structure"]) == 1
+    captured = capsys.readouterr()
+    data = json.loads(captured.out)
+    assert data["schema"] == "coral-check" and data["schema_version"] == JSON_SCHEMA_VERSION
+    assert data["command"] == "verify" and data["exit_code"] == 1
+    (entry,) = data["files"]
+    assert entry["file"] == DEADLOCK and entry["status"] == "violated"
+    assert entry["report"]["deadlock"]["verdict"] == "violated"
+    assert main(["verify", UNHANDLED, "--format", "json"]) == 1
+    captured = capsys.readouterr()
+    assert "[CORAL106]" in captured.err and "not verified: fix the errors above" in captured.err
+
+
+def test_verify_of_a_part_names_the_mission_to_verify(capsys: pytest.CaptureFixture[str]) -> None:
+    part = str(EXAMPLES / "pool_mission" / "abort.coral")
+    assert main(["verify", part]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert f"a part of {POOL}, not verified on its own; verify the mission: " in captured.err
+    assert f"coral-check verify {POOL}" in captured.err
+
+
+# -- review findings: explain, shorthand, parts, outputs over inputs ----------------------
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["lint", "--explain", "CORAL207", POOL],
+        ["lint", POOL, "--explain", "CORAL207"],
+        ["check", "--explain", "CORAL207", POOL],
+        ["verify", POOL, "--explain", "CORAL207"],
+    ],
+)
+def test_explain_with_files_is_a_usage_error(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert "--explain takes no FILE" in captured.err and captured.out == ""
+
+
+@pytest.mark.parametrize("argv", [["--explain", "CORAL207"], ["verify", "--explain", "CORAL207"]])
+def test_explain_alone_prints_the_page(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(argv) == 0
+    assert capsys.readouterr().out.startswith("## CORAL207")
+
+
+def test_options_before_a_command_name_say_the_right_order(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["--no-config", "lint", POOL]) == 2
+    err = capsys.readouterr().err
+    assert f"options go after the command name: coral-check lint --no-config {POOL}" in err
+    assert "cannot read 'lint'" not in err
+
+
+def test_version_after_a_file_answers_as_at_the_top(capsys: pytest.CaptureFixture[str]) -> None:
+    for argv in ([POOL, "--version"], ["lint", "--version"], ["fmt", "--version"]):
+        assert main(argv) == 0
+        assert re.fullmatch(r"coral-check \(coral \S+\)\n", capsys.readouterr().out)
+
+
+def test_a_certificate_for_a_part_is_refused_naming_its_mission(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = tmp_path / "my mission"
+    folder.mkdir()
+    (folder / "whole.coral").write_text(
+        'mission whole\nvehicle ROMEO\nplace a = 1, b\nfinal {b}\ninclude "step.coral"\n'
+    )
+    part = folder / "step.coral"
+    part.write_text("# coral: part of whole.coral\ntransition t wait {a} signal {b}\n")
+    cert = tmp_path / "c.json"
+    assert main(["lint", "--no-config", str(part)]) == 0  # a sound part on its own
+    capsys.readouterr()
+    assert main(["verify", "--no-config", str(part), "--certificate", str(cert)]) == 2
+    err = capsys.readouterr().err
+    mission = str(folder / "whole.coral")
+    assert f"{part} is a part of " in err and "certificates are for whole missions" in err
+    assert f"coral-check verify '{mission}' --certificate {cert}" in err
+    assert not cert.exists()
+
+
+def test_the_pool_mission_part_with_a_certificate_is_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    part = str(EXAMPLES / "pool_mission" / "abort.coral")
+    cert = tmp_path / "c.json"
+    assert main(["verify", part, "--certificate", str(cert)]) == 2
+    assert "pool_mission.coral --certificate" in capsys.readouterr().err
+    assert not cert.exists()
+
+
+def test_an_output_over_an_input_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    mission = tmp_path / "same.coral"
+    mission.write_text(CHAIN)
+    (tmp_path / "link.coral").symlink_to(mission)
+    os.link(mission, tmp_path / "hard.coral")
+    for argv in (
+        ["verify", str(mission), "-o", str(mission)],
+        ["verify", str(mission), "--certificate", str(tmp_path / "link.coral")],
+        ["check", str(mission), "-o", str(tmp_path / "hard.coral")],
+        ["lint", POOL, str(mission), "--format", "json", "-o", str(mission)],
+        ["export", str(mission), "--dot", str(mission)],
+        ["export", str(mission), "--pnml", str(tmp_path / "link.coral")],
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert "is the input file" in err and "refusing to overwrite it" in err, argv
+        assert mission.read_text() == CHAIN
+    out = tmp_path / "out.txt"
+    assert main(["verify", str(mission), "-o", str(out), "--certificate", str(out)]) == 2
+    assert "are the same file" in capsys.readouterr().err

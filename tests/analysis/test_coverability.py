@@ -10,6 +10,7 @@ import pytest
 import yaml
 from hypothesis import given, settings
 
+from analysis.budget import Budget
 from analysis.coverability import coverability
 from coral_lang.net import Net
 from coral_lang.pnml import read_pnml
@@ -150,18 +151,20 @@ def test_time_limit_with_an_injected_clock() -> None:
         {f"t{i}": ({f"p{i}": 1}, {f"p{i + 1}": 1}) for i in range(n - 1)},
     )
     ticks = itertools.count()
-    result = coverability(net, time_limit=2.5, clock=lambda: float(next(ticks)))
-    assert not result.complete and result.bounded is None and "time" in result.reason
+    result = coverability(net, budget=Budget(2.5, clock=lambda: float(next(ticks))))
+    assert not result.complete and result.bounded is None
+    assert result.reason == "time limit of 2.5 s reached after 2 nodes"
     assert "undecided" in result.explain()
 
 
 # -- random nets against the reference explorer -------------------------------------------
 
 
+@pytest.mark.slow
 @settings(max_examples=300)
 @given(small_nets())
 def test_karp_miller_agrees_with_the_reference(net: Net) -> None:
-    result = coverability(net, max_nodes=50_000, time_limit=20)
+    result = coverability(net, max_nodes=50_000, budget=Budget(20.0))
     assert result.complete  # small nets: the tree always finishes within budget
     if result.bounded:
         # A bounded net has finitely many markings: the reference finishes, with the
@@ -205,7 +208,7 @@ def test_karp_miller_matches_the_mcc_state_space(model: dict[str, Any]) -> None:
     """All MCC models are bounded: the tree has one node per reachable marking, and its
     per-place maxima are the oracle's bounds."""
     net: Net = read_pnml(Path(CONFORMANCE) / model["pnml"])
-    result = coverability(net, time_limit=60)
+    result = coverability(net, budget=Budget(60.0))
     assert result.bounded is True and result.complete
     assert result.nodes == model["states"]
     assert max(result.bounds.values()) == model["max_tokens_place"]

@@ -23,7 +23,8 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from analysis.ctl import CtlChecker, CtlError, CtlTimeout
+from analysis.budget import Budget, BudgetExceeded
+from analysis.ctl import CtlChecker, CtlError
 from analysis.stategraph import build_graph
 from analysis.statespace import explore
 from coral_lang.formula import (
@@ -180,8 +181,8 @@ def test_errors_and_timeout() -> None:
     with pytest.raises(CtlError, match="unknown transition 'nope'"):
         ck.sat(Fireable(("nope",)))
     ticks = iter(range(100))
-    late = CtlChecker(ck.graph, deadline=0.5, clock=lambda: float(next(ticks)))
-    with pytest.raises(CtlTimeout):
+    late = CtlChecker(ck.graph, budget=Budget(0.5, clock=lambda: float(next(ticks))))
+    with pytest.raises(BudgetExceeded, match=r"^labelling stopped: time limit of 0\.5 s reached$"):
         late.sat(Exists(Finally(Fireable(("enter1",)))))
 
 
@@ -331,6 +332,7 @@ def _ctl(net: Net) -> st.SearchStrategy[Formula]:
     return st.recursive(_atoms(net), extend, max_leaves=6)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, suppress_health_check=[HealthCheck.too_slow], deadline=None)
 @given(data=st.data(), net=small_nets(max_places=4, max_transitions=4, max_initial=2))
 def test_random_formulas_match_the_fixpoint_reference(data: st.DataObject, net: Net) -> None:

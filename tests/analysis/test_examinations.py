@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from analysis.examinations import Answer, Budget, QuerySession, examination_of
+from analysis.examinations import Answer, QueryLimits, QuerySession, examination_of
 from analysis.mccxml import MccProperty, PlaceBound
 from analysis.statespace import STOPPED_BY_REQUEST
 from coral_lang.formula import (
@@ -77,7 +77,7 @@ def test_reachability_search_stops_early_with_shortest_witnesses() -> None:
 def test_reachability_without_a_hit_needs_the_complete_space() -> None:
     net = counter(30)
     never = prop("never", Exists(Finally(at_least("p3", 2))))
-    answer = QuerySession(net, Budget(max_states=10)).check([never])[0]
+    answer = QuerySession(net, QueryLimits(max_states=10)).check([never])[0]
     assert answer.value is None and "incomplete" in (answer.reason or "")
     assert answer.mcc_line() == "FORMULA never CANNOT_COMPUTE"
     full = QuerySession(net).check([never])[0]
@@ -87,7 +87,7 @@ def test_reachability_without_a_hit_needs_the_complete_space() -> None:
 
 def test_a_hit_in_an_incomplete_search_still_decides() -> None:
     net = counter(30)
-    session = QuerySession(net, Budget(max_states=10))
+    session = QuerySession(net, QueryLimits(max_states=10))
     answers = session.check(
         [
             prop("ef", Exists(Finally(at_least("p4", 1)))),
@@ -123,14 +123,14 @@ def test_ctl_and_ltl_share_one_graph_and_give_traces() -> None:
 
 
 def test_the_graph_budget_makes_ctl_cannot_compute() -> None:
-    session = QuerySession(mutex(), Budget(max_edges=3))
+    session = QuerySession(mutex(), QueryLimits(max_edges=3))
     answer = session.check([prop("af", All(Finally(at_least("cs1", 1))))])[0]
     assert answer.value is None and "budget" in (answer.reason or "")
 
 
 def test_the_time_limit_makes_formulas_cannot_compute() -> None:
     ticks = iter(range(0, 10_000, 10))
-    session = QuerySession(mutex(), Budget(time_limit=5), clock=lambda: float(next(ticks)))
+    session = QuerySession(mutex(), QueryLimits(time_limit=5), clock=lambda: float(next(ticks)))
     answers = session.check([prop("af", All(Finally(at_least("cs1", 1))))])
     assert answers[0].value is None
 
@@ -149,7 +149,7 @@ def test_upper_bounds_with_a_witness() -> None:
 
 def test_upper_bounds_on_an_incomplete_space_use_p_invariants() -> None:
     net = counter(30)  # one token in total: every place is bounded by 1
-    answers = QuerySession(net, Budget(max_states=5)).check(
+    answers = QuerySession(net, QueryLimits(max_states=5)).check(
         [prop("p1", PlaceBound(("p1",))), prop("p20", PlaceBound(("p20",)))]
     )
     assert answers[0].value == 1 and "TOPOLOGICAL" in answers[0].techniques
@@ -246,7 +246,7 @@ def test_deadlock_on_an_incomplete_search_uses_stubborn_sets() -> None:
         {f"{c}{i}": int(i == 0) for c in "abcdefghij" for i in range(3)},
         {f"{c}{i}": ({f"{c}{i}": 1}, {f"{c}{i + 1}": 1}) for c in "abcdefghij" for i in range(2)},
     )
-    answer = QuerySession(net, Budget(max_states=1_000)).check_global("ReachabilityDeadlock")
+    answer = QuerySession(net, QueryLimits(max_states=1_000)).check_global("ReachabilityDeadlock")
     assert answer.value is True and "STUBBORN_SETS" in answer.techniques
     assert replay(net, answer.trace or ()) == tuple(
         int(i == 2) for _ in range(10) for i in range(3)
@@ -273,6 +273,7 @@ def test_answer_json() -> None:
     assert Answer("g", None, reason="x").to_dict()["status"] == "cannot_compute"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("width", [1, 12])
 def test_explore_stop_when_stops_at_the_shallowest_hit(width: int) -> None:
     """``explore(stop_when=...)``: narrow layers (one chain) and wide ones (12 chains)."""
@@ -335,6 +336,7 @@ SMALL_BUDGET_MODELS = (
 )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SMALL_BUDGET_MODELS)
 def test_deadlock_with_a_search_too_small_is_never_wrong(name: str) -> None:
     """With 20 markings no search completes: a deadlock-free net may then be proven so by
@@ -344,7 +346,7 @@ def test_deadlock_with_a_search_too_small_is_never_wrong(name: str) -> None:
     }
     expected = oracle[name]["deadlock"]
     net = read_pnml(CONFORMANCE / "pnml" / f"{name}.pnml")
-    answer = QuerySession(net, Budget(max_states=20)).check_global("ReachabilityDeadlock")
+    answer = QuerySession(net, QueryLimits(max_states=20)).check_global("ReachabilityDeadlock")
     assert answer.value in (expected, None)
     if answer.value is False:
         assert answer.techniques == ("STATE_EQUATION",)
@@ -353,6 +355,6 @@ def test_deadlock_with_a_search_too_small_is_never_wrong(name: str) -> None:
 def test_deadlock_freedom_of_a_large_net_is_proven_without_exploring_it() -> None:
     """Kanban-PT-00005 has 2.5M markings; 1,000 are explored, z3 proves the rest."""
     net = read_pnml(CONFORMANCE / "pnml" / "Kanban-PT-00005.pnml")
-    answer = QuerySession(net, Budget(max_states=1_000)).check_global("ReachabilityDeadlock")
+    answer = QuerySession(net, QueryLimits(max_states=1_000)).check_global("ReachabilityDeadlock")
     assert answer.value is False
     assert answer.mcc_line().endswith("FALSE TECHNIQUES STATE_EQUATION")

@@ -20,10 +20,20 @@ from analysis.cli import main
 from analysis.html_report import _script_json, render_html
 from analysis.netdraw import token_text
 from analysis.outcome import FileOutcome
-from analysis.report import Step
+from analysis.pipeline import CheckOptions, check_file
+from analysis.report import (
+    MAX_TRACE_STEPS,
+    Evidence,
+    PropertyResult,
+    Report,
+    StateSpaceFigures,
+    Step,
+    Verdict,
+)
 from analysis.verify import VerifyOptions, verify
 from coral_lang import compile_file
 from coral_lang.net import Net, format_tokens
+from tests.analysis.nets import make_net
 from tests.conftest import EXAMPLES
 
 POOL = str(EXAMPLES / "pool_mission" / "pool_mission.coral")
@@ -136,6 +146,7 @@ def parse(page: str) -> Element:
 # -- without a browser ------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_the_page_is_self_contained(tmp_path: Path) -> None:
     page = _report(tmp_path, POOL, DEADLOCK, code=1).read_text()
     assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
@@ -147,7 +158,8 @@ def test_the_page_is_self_contained(tmp_path: Path) -> None:
 
 
 def test_verdicts_drawing_invariants_and_figures_of_the_pool_mission(tmp_path: Path) -> None:
-    dom = parse(_report(tmp_path, POOL, code=0).read_text())
+    page = _report(tmp_path, POOL, code=0).read_text()
+    dom = parse(page)
     rows = dom.find("table", "verdicts").find_all("tr", "prop")
     assert len(rows) == 12
     assert [row.find("span", "badge").text for row in rows] == ["proven"] * 12
@@ -158,7 +170,13 @@ def test_verdicts_drawing_invariants_and_figures_of_the_pool_mission(tmp_path: P
     assert dom.find("div", "P-inv").find_all("li")[0].text.startswith("start + init_ok")
     figures = dom.find("table", "figures").text
     assert "states82" in figures.replace(" ", "") and "edges139" in figures.replace(" ", "")
-    assert dom.find_all("section", "cx") == []  # nothing violated, nothing to replay
+    # nothing violated; the witnesses of the reachability properties are replayed
+    witnesses = dom.find_all("section", "cx")
+    assert all("witness" in w.attrs["class"] for w in witnesses)
+    assert [w.attrs["id"] for w in witnesses] == ["f0-wit-final_reachable", "f0-wit-assert-2"]
+    assert "<h3>Counterexamples</h3>" not in page and "<h3>Witnesses</h3>" in page
+    link = rows[2].find("a")
+    assert link.attrs["href"] == "#f0-wit-final_reachable" and link.text.startswith("witness, ")
 
 
 def test_each_step_is_listed_with_its_source_and_marking_without_script(tmp_path: Path) -> None:
@@ -197,8 +215,9 @@ def test_mission_text_is_escaped(tmp_path: Path) -> None:
     assert "<script>alert" not in page and "<b>bold</b>" not in page
     assert "&lt;script&gt;alert(&#x27;x&#x27;)&lt;/script&gt; &amp; &lt;b&gt;bold&lt;/b&gt;" in page
     assert "a&lt;b&amp;c&gt;.coral" in page and "a<b&c>" not in page
-    # each counterexample's data (deadlock, final_always_reachable, terminates), the player
-    assert page.count("<script") == 4
+    # each counterexample's data (deadlock, final_always_reachable, terminates), the
+    # witness of final_reachable, the player
+    assert page.count("<script") == 5
     assert (
         _script_json({"x": "</script><b>&"})
         == '{"x":"\\u003c/script\\u003e\\u003cb\\u003e\\u0026"}'
@@ -331,3 +350,50 @@ def test_browser_screenshot(chromium: str, tmp_path: Path) -> None:
     data = shot.read_bytes()
     assert data.startswith(b"\x89PNG\r\n\x1a\n") and len(data) > 20_000
     print(f"screenshot of the deadlock report at step 3: {shot}")
+
+
+def test_findings_are_located_in_the_verdict_table() -> None:
+    path = str(EXAMPLES / "faulty" / "dead_transition.coral")
+    outcome = check_file(path, CheckOptions(verify=VerifyOptions(structural=False)))
+    assert outcome.net is not None
+    dom = parse(render_html([outcome], layout="builtin"))
+    row = next(
+        r
+        for r in dom.find("table", "verdicts").find_all("tr", "prop")
+        if r.attrs["data-key"] == "dead_transitions"
+    )
+    items = [li.text for li in row.find("ul", "findings").find_all("li")]
+    span = outcome.net.transition("record_dock").span
+    assert f"{span} transition 'record_dock' can never fire" in items
+
+
+def test_a_long_trace_shows_its_first_steps_and_counts_the_rest() -> None:
+    size = 4
+    net = make_net(
+        "ring",
+        {f"p{i}": int(i == 0) for i in range(size)},
+        {f"t{i}": ({f"p{i}": 1}, {f"p{(i + 1) % size}": 1}) for i in range(size)},
+    )
+    total = MAX_TRACE_STEPS + 12
+    steps = tuple(
+        Step(n, f"t{(n - 1) % size}", "mission", f"t{(n - 1) % size} fires")
+        for n in range(1, total + 1)
+    )
+    evidence = Evidence(trace=steps, marking={"p0": 1} if total % size == 0 else None)
+    prop = PropertyResult("deadlock", "no deadlock", Verdict.VIOLATED, "m", "d", evidence)
+    figures = StateSpaceFigures(4, 4, 1, 1, {}, True, None, False, 0.0, 0.0)
+    report = Report("ring", net.digest(), (), figures, [prop])
+    page = render_html([FileOutcome("ring.pnml", net=net, report=report)], layout="builtin")
+    section = parse(page).find("section", "cx")
+    assert len(section.find("ol", "steps").find_all("li")) == MAX_TRACE_STEPS + 1
+    note = section.find("p", "more-steps").text
+    assert "... 12 more steps (full trace in --format json)" in note
+
+
+def test_a_part_says_which_mission_verifies_it() -> None:
+    part = check_file(EXAMPLES / "pool_mission" / "docking.coral", CheckOptions())
+    page = render_html([part], layout="builtin")
+    section = parse(page).find("section", "file")
+    assert section.find("span", "badge").text == "part"
+    assert "A part of" in section.text and "pool_mission.coral" in section.text
+    assert "Not verified: fix the errors first" not in page

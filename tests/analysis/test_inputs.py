@@ -165,6 +165,7 @@ def nets_with_inputs(draw: st.DrawFn, max_inputs: int = 2) -> Net:
     return Net("random", tuple(places), tuple(transitions), tuple(finals))
 
 
+@pytest.mark.slow
 @given(nets_with_inputs())
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 def test_reachable_markings_and_deadlocks_match_the_literal_run_rule(net: Net) -> None:
@@ -190,6 +191,7 @@ def test_reachable_markings_and_deadlocks_match_the_literal_run_rule(net: Net) -
         assert _replays_legally(net, space.trace_to(state)) == space.marking(state)
 
 
+@pytest.mark.slow
 @given(nets_with_inputs(), st.data())
 @settings(max_examples=100, deadline=None)
 def test_legal_trace_reaches_the_same_marking_with_every_input_in_time(
@@ -398,6 +400,7 @@ def test_the_builtin_drawing_fills_inputs_and_armed_places() -> None:
 # -- final markings without the 2**k expansion ---------------------------------------------
 
 
+@pytest.mark.slow
 @given(nets_with_inputs(max_inputs=3))
 @settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 def test_projected_finals_pick_the_same_reachable_markings_as_the_expanded_ones(
@@ -425,11 +428,13 @@ def _z3_admits(net: Net, bad: BadMarkings, marking: Marking) -> bool:
     marking always solves the equation itself, so this is the bad-set encoding)."""
     import z3
 
-    solver, variables, _ = _equation(net, bad, None, 5_000)
+    solver, variables, _ = _equation(net, bad, None)
+    solver.set("timeout", 5_000)
     solver.add(*[v == k for v, k in zip(variables, marking, strict=True)])
     return bool(solver.check() == z3.sat)
 
 
+@pytest.mark.slow
 @given(nets_with_inputs(max_inputs=3))
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 def test_the_z3_encoding_of_projected_finals_excludes_the_same_markings(net: Net) -> None:
@@ -493,6 +498,7 @@ print(code, peak)
 """
 
 
+@pytest.mark.slow
 def test_verify_on_an_eight_input_mission_stays_small(tmp_path: Path) -> None:
     """`coral-check verify` on 8 inputs and 6 finals peaked at about 2.1 GB when finals
     were expanded (about 130 MB now, mostly imports). The child reports the peak of

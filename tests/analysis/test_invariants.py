@@ -5,9 +5,11 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+import pytest
 import z3
 from hypothesis import given, settings
 
+from analysis.budget import Budget
 from analysis.invariants import (
     invariant_bounds,
     invariant_report,
@@ -117,15 +119,16 @@ def test_row_limit_says_incomplete_and_keeps_only_genuine_invariants() -> None:
     full = p_invariants(net)
     assert full.complete
     limited = p_invariants(net, max_rows=3)
-    assert not limited.complete and "rows" in limited.reason
+    assert not limited.complete and limited.reason == "intermediate row budget of 3 reached"
     assert {inv.weights for inv in limited.invariants} <= {inv.weights for inv in full.invariants}
     assert "incomplete" in limited.explain()
 
 
 def test_time_limit_with_an_injected_clock() -> None:
     ticks = itertools.count()
-    result = p_invariants(mutex(), time_limit=0.5, clock=lambda: float(next(ticks)))
-    assert not result.complete and "time limit" in result.reason
+    budget = Budget(0.5, clock=lambda: float(next(ticks)))
+    result = p_invariants(mutex(), budget=budget)
+    assert not result.complete and result.reason == "time limit of 0.5 s reached"
 
 
 def test_semiflows_of_an_empty_matrix() -> None:
@@ -140,6 +143,7 @@ def _is_strict_superset(a: frozenset[int], b: frozenset[int]) -> bool:
     return b < a
 
 
+@pytest.mark.slow
 @settings(max_examples=200)
 @given(small_nets())
 def test_p_invariants_hold_on_every_reachable_marking(net: Net) -> None:
@@ -158,6 +162,7 @@ def test_p_invariants_hold_on_every_reachable_marking(net: Net) -> None:
             assert max(m[i] for m in reference.states) <= bounds[place.name]
 
 
+@pytest.mark.slow
 @settings(max_examples=200)
 @given(small_nets())
 def test_t_invariants_are_flows_and_all_invariants_minimal(net: Net) -> None:
@@ -190,6 +195,7 @@ def _has_semiflow_within(matrix: np.ndarray, support: tuple[int, ...], kind: str
     return bool(solver.check() == z3.sat)
 
 
+@pytest.mark.slow
 @settings(max_examples=60)
 @given(small_nets(max_places=4, max_transitions=4))
 def test_every_minimal_support_is_found(net: Net) -> None:

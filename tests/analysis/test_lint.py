@@ -68,6 +68,22 @@ def test_suppression_with_reason_silences_one_rule_on_one_line() -> None:
     assert _codes(other_rule) == ["CORAL207"]
 
 
+def test_a_suppression_after_code_covers_its_own_line_only() -> None:
+    # after code on the line above: it is about that line (ta), not the next
+    after_code = (
+        HEADER + "place s = 1, a, b\nfinal { a }\nfinal { b }\n"
+        "transition ta wait { s } signal { a }  # coral: allow CORAL207 -- either is fine\n"
+        "transition tb wait { s } signal { b }\n"
+    )
+    assert _codes(after_code) == ["CORAL207"]
+    # alone on its line, with a blank line before the statement: it reaches nothing
+    apart = (
+        RACE
+        + "# coral: allow CORAL207 -- either is fine\n\ntransition tb wait { s } signal { b }\n"
+    )
+    assert _codes(apart) == ["CORAL207"]
+
+
 def test_bad_suppressions_are_reported() -> None:
     unknown = RACE + "transition tb wait { s } signal { b }  # coral: allow CORAL999 -- typo\n"
     assert sorted(_codes(unknown)) == ["CORAL207", "CORAL208"]
@@ -124,6 +140,7 @@ SHARED = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("text", SHARED, ids=[f"mission{i}" for i in range(len(SHARED))])
 def test_a_shared_state_space_gives_the_same_findings(text: str) -> None:
     """coral-check hands lint the verifier's state space: the findings must not change."""

@@ -579,6 +579,7 @@ def nets_and_formulas(draw: st.DrawFn) -> tuple[StateGraph, Formula, bool]:
     return build_graph(space), draw(ltl_formulas(net)), draw(st.booleans())
 
 
+@pytest.mark.slow
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
 @given(nets_and_formulas())
 def test_random_formulas_agree_with_the_references(
@@ -604,6 +605,7 @@ def test_random_formulas_agree_with_the_references(
         assert_counterexample(graph, formula, layered, groups)
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
 @given(nets_and_formulas())
 def test_stutter_laws_on_random_nets(case: tuple[StateGraph, Formula, bool]) -> None:

@@ -24,7 +24,7 @@ from typing import Any
 import pytest
 import yaml
 
-from analysis.examinations import GLOBAL_EXAMINATIONS, QUERY_EXAMINATIONS, Budget, QuerySession
+from analysis.examinations import GLOBAL_EXAMINATIONS, QUERY_EXAMINATIONS, QueryLimits, QuerySession
 from analysis.mccxml import MccProperty, parse_properties
 from coral_lang.net import Net
 from coral_lang.pnml import parse_pnml
@@ -91,12 +91,13 @@ def test_the_vendored_data_is_all_there() -> None:
         assert (MCC / model["pnml"]).is_file()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", [_param(n) for n in _models()])
 def test_every_answer_matches_the_contest(name: str) -> None:
     model = _models()[name]
     net = _net(model)
     session = QuerySession(
-        net, Budget(max_states=MAX_STATES, time_limit=TIME_LIMIT, max_edges=MAX_EDGES)
+        net, QueryLimits(max_states=MAX_STATES, time_limit=TIME_LIMIT, max_edges=MAX_EDGES)
     )
     props = _properties(model, net)
     answers = session.check([p for p, _ in props])

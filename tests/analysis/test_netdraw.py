@@ -3,14 +3,21 @@
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import pytest
 
 from analysis.netdraw import (
+    AUTO_GRAPHVIZ_MAX_ARCS,
+    AUTO_GRAPHVIZ_MAX_TRANSITIONS,
+    FORCED_GRAPHVIZ_TIMEOUT_S,
+    GRAPHVIZ_TIMEOUT_S,
     MAX_DRAWN_NODES,
+    arc_count,
     draw_net,
     graphviz_available,
     token_text,
+    too_large_for_graphviz,
 )
 from coral_lang import compile_file
 from coral_lang.net import Net
@@ -108,3 +115,50 @@ def test_huge_nets_are_not_drawn() -> None:
     )
     drawing = draw_net(net)
     assert drawing.svg == "" and drawing.layout == "none" and str(2 * n) in drawing.note
+
+
+def _ring(transitions: int) -> Net:
+    return make_net(
+        "ring",
+        {f"p{i}": int(i == 0) for i in range(transitions)},
+        {f"t{i}": ({f"p{i}": 1}, {f"p{(i + 1) % transitions}": 1}) for i in range(transitions)},
+    )
+
+
+def _program(tmp_path: Path, name: str, body: str) -> str:
+    """A stand-in for ``dot``: a shell script that records it ran, then ``body``."""
+    script = tmp_path / name
+    script.write_text(f"#!/bin/sh\necho ran >> {tmp_path / 'calls'}\n{body}\n")
+    script.chmod(0o755)
+    return str(script)
+
+
+def test_auto_does_not_try_graphviz_on_large_nets(tmp_path: Path) -> None:
+    program = _program(tmp_path, "dot-spy", "exit 1")
+    large = _ring(AUTO_GRAPHVIZ_MAX_TRANSITIONS + 1)
+    assert too_large_for_graphviz(large).startswith(f"{AUTO_GRAPHVIZ_MAX_TRANSITIONS + 1} ")
+    drawing = draw_net(large, "auto", dot_program=program)
+    assert drawing.layout == "builtin" and "Graphviz was not tried" in drawing.note
+    assert "--net-layout graphviz" in drawing.note
+    assert not (tmp_path / "calls").exists()
+    # --net-layout graphviz forces it (here it fails, so the fallback says why).
+    forced = draw_net(large, "graphviz", dot_program=program)
+    assert (tmp_path / "calls").read_text() == "ran\n"
+    assert forced.layout == "builtin" and "Graphviz failed" in forced.note
+    # A net at the limits is tried.
+    assert too_large_for_graphviz(_ring(AUTO_GRAPHVIZ_MAX_TRANSITIONS)) == ""
+    dense = make_net(
+        "dense",
+        {f"p{i}": 1 for i in range(AUTO_GRAPHVIZ_MAX_ARCS // 10 + 1)},
+        {f"t{j}": ({f"p{i}": 1 for i in range(6 + j % 2)}, {"p0": 1}) for j in range(70)},
+    )
+    assert arc_count(dense) > AUTO_GRAPHVIZ_MAX_ARCS and len(dense.transitions) <= 80
+    assert "arcs, over" in too_large_for_graphviz(dense)
+
+
+def test_a_slow_graphviz_is_cut_off_and_the_builtin_layout_used(tmp_path: Path) -> None:
+    program = _program(tmp_path, "dot-slow", "exec sleep 30")
+    drawing = draw_net(mutex(), "auto", dot_program=program, timeout_s=0.3)
+    assert drawing.layout == "builtin" and "no layout within 0.3 s" in drawing.note
+    assert len(_nodes(drawing.svg, "place")) == 5
+    assert GRAPHVIZ_TIMEOUT_S <= 5 < FORCED_GRAPHVIZ_TIMEOUT_S

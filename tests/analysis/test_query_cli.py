@@ -59,6 +59,7 @@ def _expected(exam: str) -> dict[str, str]:
     }
 
 
+@pytest.mark.slow
 def test_query_files_print_one_mcc_line_each(
     mcc_dir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -76,6 +77,7 @@ def test_query_files_print_one_mcc_line_each(
     assert all(line.endswith("TECHNIQUES EXPLICIT STATE_COMPRESSION") for line in out.splitlines())
 
 
+@pytest.mark.slow
 def test_examinations_found_in_the_mcc_folder(
     mcc_dir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -181,3 +183,31 @@ def test_bad_inputs_exit_2(
 def test_help_exits_0(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["query", "--help"]) == 0
     assert "coral-check query" in capsys.readouterr().out
+
+
+def test_output_over_an_input_is_refused(mcc_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    model = mcc_dir / "model.pnml"
+    queries = mcc_dir / "UpperBounds.xml"
+    before = queries.read_bytes()
+    for argv in (
+        ["query", str(model), str(queries), "-o", str(queries)],
+        ["query", str(model), "--examination", "OneSafe", "-o", str(model)],
+    ):
+        assert main(argv) == 2
+        assert "refusing to overwrite it" in capsys.readouterr().err
+    assert queries.read_bytes() == before
+
+
+def test_budgets_keep_query_s_own_defaults_and_help(capsys: pytest.CaptureFixture[str]) -> None:
+    from analysis.examinations import DEFAULT_MAX_EDGES, DEFAULT_MAX_STATES
+    from analysis.query_cli import build_query_parser
+
+    args = build_query_parser().parse_args(["m.pnml", "--examination", "OneSafe"])
+    assert (args.max_states, args.time_limit, args.max_edges) == (
+        DEFAULT_MAX_STATES,
+        600.0,
+        DEFAULT_MAX_EDGES,
+    )
+    assert main(["query", "--help"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "time for the whole run (default 600)" in out and "--color" not in out

@@ -66,6 +66,7 @@ def test_the_vendored_schema_is_the_official_one() -> None:
     assert (SCHEMA.parent / "README.md").read_text().count("sarif-2.1.0-rtm.5.json") >= 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", [POOL, *FAULTY], ids=lambda p: p.name)
 def test_every_example_gives_a_valid_log(
     path: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
@@ -84,6 +85,7 @@ def test_every_example_gives_a_valid_log(
         assert _results(log) == [] and run["invocations"][0]["exitCode"] == 0
 
 
+@pytest.mark.slow
 def test_driver_lists_every_rule_once_and_results_point_at_theirs(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
@@ -145,6 +147,7 @@ def test_a_deadlock_trace_is_a_code_flow_over_the_source(
     assert _region(result)[1] == lines[-1]  # where the deadlock is reached: the last step
 
 
+@pytest.mark.slow
 def test_an_unbounded_place_shows_its_pumping_loop(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:

@@ -7,6 +7,8 @@ import resource
 import time
 import tracemalloc
 
+import pytest
+
 from analysis.invariants import invariant_report, p_invariants
 from analysis.lint import LintOptions, lint
 from analysis.structural import classify, structural_boundedness
@@ -35,6 +37,7 @@ def _lint_seconds(result: CompileResult, options: LintOptions | None = None) -> 
     return time.perf_counter() - start
 
 
+@pytest.mark.slow
 def test_a_20000_transition_chain_lints_in_seconds() -> None:
     big = _compiled(_chain(20_000))
     start = time.perf_counter()
@@ -73,6 +76,7 @@ def _with_unused_places(n: int) -> CompileResult:
     return _compiled("\n".join(lines) + "\n")
 
 
+@pytest.mark.slow
 def test_structure_of_20000_unused_places_stays_small_and_fast() -> None:
     net = _with_unused_places(20_000).net
     assert net is not None

@@ -401,6 +401,7 @@ def test_every_property_verdict_is_read_not_only_the_summary(
     assert "inconclusive" in signed_with(listed, verdict="inconclusive")
 
 
+@pytest.mark.slow
 def test_the_summary_verdict_is_derived_from_the_properties(tmp_path: Path) -> None:
     """A search cut short by its budget leaves properties inconclusive, so the
     certificate cannot say proven, whatever else is true."""
@@ -537,6 +538,7 @@ def test_coral_run_trusted_keys_errors_are_input_errors(
     assert "no such trusted keys file" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_verify_runs_without_a_key_and_its_certificate_needs_verify_again(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -10,6 +10,7 @@ import pytest
 import yaml
 from hypothesis import given, settings
 
+from analysis.budget import Budget
 from analysis.siphons import (
     is_siphon,
     is_trap,
@@ -107,7 +108,7 @@ def test_siphon_budget_says_incomplete() -> None:
         for i, j in itertools.combinations(range(n), 2)
     }
     result = minimal_siphons(make_net("dense", places, transitions), max_branches=5)
-    assert not result.complete and "partial sets" in result.reason
+    assert not result.complete and result.reason == "partial set budget of 5 reached"
     assert "incomplete" in result.explain()
 
 
@@ -126,6 +127,7 @@ def _brute_minimal_siphons(net: Net) -> set[tuple[str, ...]]:
     return {tuple(sorted(s)) for s in minimal}
 
 
+@pytest.mark.slow
 @settings(max_examples=200)
 @given(small_nets())
 def test_minimal_siphons_match_brute_force(net: Net) -> None:
@@ -136,6 +138,7 @@ def test_minimal_siphons_match_brute_force(net: Net) -> None:
         assert is_siphon(net, siphon)
 
 
+@pytest.mark.slow
 @settings(max_examples=200)
 @given(small_nets())
 def test_maximal_trap_is_the_union_of_traps_inside(net: Net) -> None:
@@ -154,6 +157,7 @@ def test_maximal_trap_is_the_union_of_traps_inside(net: Net) -> None:
     assert maximal_trap(net, names) == union
 
 
+@pytest.mark.slow
 @settings(max_examples=300)
 @given(small_nets(max_weight=1))
 def test_deadlock_freedom_claims_hold_on_ordinary_nets(net: Net) -> None:
@@ -187,13 +191,14 @@ _BIG = {"TokenRing-PT-010", "Peterson-PT-3", "Anderson-PT-04", "TokenRing-PT-005
 )
 def test_siphon_trap_claims_never_contradict_the_mcc_oracle(model: dict[str, Any]) -> None:
     net: Net = read_pnml(Path(CONFORMANCE) / model["pnml"])
-    check = siphon_trap_check(net, max_branches=20_000, time_limit=2.0)
+    check = siphon_trap_check(net, max_branches=20_000, budget=Budget(2.0))
     if model["deadlock"]:
         assert not check.proves_deadlock_free, check.explain()
     if model["live"] is False:
         assert not check.proves_live, check.explain()
 
 
+@pytest.mark.slow
 def test_weighted_mcc_model_with_the_property_still_deadlocks() -> None:
     """PGCD is weighted: every minimal siphon holds a marked trap, yet it deadlocks."""
     model = next((m for m in _oracle_models() if m["model"] == "PGCD-PT-D02N005"), None)

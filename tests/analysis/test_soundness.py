@@ -125,7 +125,8 @@ def test_a_signed_pre_fix_certificate_resting_on_the_explorer_is_refused(
     assert "checker revision 1" in message and "explorer-64-bit-wrap" in message
     assert "commit 29d4413" in message and "bounded by explicit state space" in message
     assert f"re-verify with this version (checker revision {CHECKER_REVISION})" in message
-    assert "coral-check verify MISSION" in message
+    # The way out names the files, not placeholders.
+    assert f"coral-check verify {tmp_path / 'pump.coral'} --certificate {cert}" in message
     # The same claims from a revision without the bug pass: the table decides.
     fixed = _signed(tmp_path / "fixed.cert.json", {**old, "checker_revision": 2}, signing_key)
     check = check_mission_certificate(mission, fixed, trusted=signing_key.trusted)

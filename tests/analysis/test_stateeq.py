@@ -11,6 +11,7 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from analysis.budget import Budget
 from analysis.invariants import p_invariants, t_invariants
 from analysis.stateeq import (
     METHOD,
@@ -123,7 +124,7 @@ def test_timeout_gives_unknown() -> None:
     path = CONFORMANCE / "pnml" / "DoubleExponent-PT-003.pnml"
     assert path.exists(), "the vendored conformance data (tests/data/mcc) is missing"
     net: Net = read_pnml(path)
-    result = check_unreachable(net, deadlocks(), timeout_ms=1, use_traps=False)
+    result = check_unreachable(net, deadlocks(), query_seconds=0.001, use_traps=False)
     assert isinstance(result, Unknown) and "z3" in result.reason
     assert "inconclusive" in result.explain()
 
@@ -154,11 +155,12 @@ def nets_and_bad_sets(draw: st.DrawFn) -> tuple[Net, BadMarkings]:
     return net, BadMarkings(constraints=(PlaceConstraint(terms, op, draw(st.integers(-1, 3))),))
 
 
+@pytest.mark.slow
 @settings(max_examples=300)
 @given(nets_and_bad_sets())
 def test_state_equation_never_contradicts_the_reference(case: tuple[Net, BadMarkings]) -> None:
     net, bad = case
-    result = check_unreachable(net, bad, timeout_ms=5_000)
+    result = check_unreachable(net, bad, query_seconds=5.0)
     reference = explore_reference(net, max_states=3_000)
     found = [m for m in reference.states if bad.matches(net, m)]
     if isinstance(result, Proven):
@@ -201,16 +203,18 @@ def _param(model: dict[str, Any]) -> Any:
     return pytest.param(model, id=str(model["model"]), marks=marks)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "model", [_param(m) for m in _oracle_models() if m.get("deadlock") is not None]
 )
 def test_deadlock_proofs_never_contradict_the_mcc_oracle(model: dict[str, Any]) -> None:
     net: Net = read_pnml(Path(CONFORMANCE) / model["pnml"])
-    result = check_unreachable(net, deadlocks(), timeout_ms=3_000, time_limit=10)
+    result = check_unreachable(net, deadlocks(), query_seconds=3.0, budget=Budget(10.0))
     if model["deadlock"]:
         assert not isinstance(result, Proven), result.explain()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "method"),
     [
@@ -226,7 +230,7 @@ def test_deadlock_freedom_is_proven_on_known_deadlock_free_models(name: str, met
     assert model is not None, "the vendored conformance data (tests/data/mcc) is missing"
     assert model["deadlock"] is False
     net: Net = read_pnml(Path(CONFORMANCE) / model["pnml"])
-    result = check_unreachable(net, deadlocks(), timeout_ms=10_000, time_limit=30)
+    result = check_unreachable(net, deadlocks(), query_seconds=10.0, budget=Budget(30.0))
     assert isinstance(result, Proven) and result.method == method
 
 

@@ -17,7 +17,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import analysis.encoding as encoding
+import analysis.encoding.keystore as keystore
 import analysis.statespace as statespace
+from analysis.budget import Budget
 from analysis.encoding import CompactNet, KeyStore, Layout
 from analysis.graph import to_networkx
 from analysis.progress import ProgressInfo, ProgressPrinter
@@ -66,6 +68,7 @@ def _agree(space: StateSpace, ref: ReferenceResult, net: Net) -> None:
     assert space.fired_transitions.tolist() == enabled_somewhere
 
 
+@pytest.mark.slow
 @settings(max_examples=300)
 @given(small_nets())
 def test_explorer_agrees_with_the_reference(net: Net) -> None:
@@ -79,6 +82,7 @@ def test_explorer_agrees_with_the_reference(net: Net) -> None:
     _agree(space, ref, net)
 
 
+@pytest.mark.slow
 @settings(max_examples=100)
 @given(small_nets(max_weight=3, max_initial=3), st.integers(1, 64))
 def test_small_chunks_give_the_same_answer(net: Net, chunk: int) -> None:
@@ -93,6 +97,7 @@ def test_small_chunks_give_the_same_answer(net: Net, chunk: int) -> None:
         }
 
 
+@pytest.mark.slow
 @settings(max_examples=100)
 @given(small_nets(), st.data())
 def test_find_returns_a_shallowest_witness(net: Net, data: st.DataObject) -> None:
@@ -117,7 +122,7 @@ def test_find_returns_a_shallowest_witness(net: Net, data: st.DataObject) -> Non
 def test_unbounded_net_stops_at_the_state_budget() -> None:
     space = explore(_pump(), max_states=50)
     assert not space.complete and space.states == 50
-    assert space.stopped_reason == "state budget reached (max_states=50)"
+    assert space.stopped_reason == "state budget of 50 reached"
     assert space.marking(49) == (1, 49)
 
 
@@ -163,14 +168,15 @@ def test_token_counts_past_the_field_limit_stop_with_a_reason(
 
 def test_time_limit_is_respected_with_a_fake_clock() -> None:
     ticks = itertools.count()
-    space = explore(_pump(), max_states=None, time_limit=5.0, chunk=1, clock=lambda: next(ticks))
+    budget = Budget(5.0, clock=lambda: float(next(ticks)))
+    space = explore(_pump(), max_states=None, budget=budget, chunk=1)
     assert not space.complete
-    assert space.stopped_reason == "time limit reached (5 s)"
+    assert space.stopped_reason == f"time limit of 5 s reached after {space.states} states"
     assert space.states < 20
 
 
 def test_time_limit_is_respected_on_the_real_clock() -> None:
-    space = explore(_pump(), max_states=None, time_limit=0.2)
+    space = explore(_pump(), max_states=None, budget=Budget(0.2))
     assert not space.complete and space.seconds < 5.0
     assert space.stopped_reason is not None and "time limit" in space.stopped_reason
 
@@ -300,6 +306,7 @@ def _agrees_on_walker(net: Net, space: StateSpace) -> None:
     assert {space.marking(i) for i in range(space.states)} == set(reference.states)
 
 
+@pytest.mark.slow
 def test_wide_markings_hash_with_whole_arrays_and_stay_exact() -> None:
     from analysis.encoding import WIDE_KEYS
 
@@ -310,6 +317,7 @@ def test_wide_markings_hash_with_whole_arrays_and_stay_exact() -> None:
     _agrees_on_walker(net, space)
 
 
+@pytest.mark.slow
 def test_one_hot_components_pack_a_walking_token_into_a_few_bits() -> None:
     net = _walker(600, leak=False)
     space = explore(net)
@@ -345,10 +353,11 @@ def _mode(name: str, components: bool = True) -> Iterator[None]:
         yield
 
 
-def _none(cn: CompactNet) -> list[encoding.Component]:
+def _none(cn: CompactNet, budget: Budget | None = None) -> list[encoding.Component]:
     return []
 
 
+@pytest.mark.slow
 @settings(max_examples=400)
 @given(
     small_nets(max_places=7, max_transitions=9),
@@ -400,7 +409,7 @@ def test_sleep_sets_fire_about_one_edge_per_state_on_independent_transitions() -
 def test_key_store_resolves_hash_collisions_exactly(monkeypatch: pytest.MonkeyPatch) -> None:
     # A hash with 16 values: two-word keys collide all the time, in tags and in slots.
     weak = lambda keys: (keys[:, 0] & np.uint64(15)) * np.uint64(0x9E3779B97F4A7C15)  # noqa: E731
-    monkeypatch.setattr(encoding, "_hash", weak)
+    monkeypatch.setattr(keystore, "_hash", weak)
     rng = np.random.default_rng(7)
     store, seen = KeyStore(2), dict[tuple[int, ...], int]()
     for size in (5, 300, 2000, 40, 2000):
@@ -436,13 +445,14 @@ def test_one_hot_components_are_proven_invariants() -> None:
     assert space.states == BUDGET and not space.complete
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("words", "weak"), [(1, False), (2, False), (9, False), (3, True)])
 def test_key_store_matches_a_dict(words: int, weak: bool, monkeypatch: pytest.MonkeyPatch) -> None:
     """Batches with repeats, budgets and growth (table rebuilds, wrap-around) against a
     plain dict; ``weak`` makes the hash take 16 values (tags and slots collide)."""
     if weak:
         weak_hash = lambda keys: (keys[:, 0] & np.uint64(15)) * np.uint64(0x9E3779B97F4A7C15)  # noqa: E731
-        monkeypatch.setattr(encoding, "_hash", weak_hash)
+        monkeypatch.setattr(keystore, "_hash", weak_hash)
     rng = np.random.default_rng(words)
     store, seen = KeyStore(words), dict[tuple[int, ...], int]()
     for r in range(12):
@@ -492,6 +502,7 @@ def test_parts_of_a_flow_hold_at_most_one_token_and_are_packed_so() -> None:
     assert space.max_tokens_place == 3 and space.max_tokens_marking == 3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fields", [5, 300])
 def test_repacking_with_wider_fields_keeps_every_count(fields: int) -> None:
     rng = np.random.default_rng(fields)

@@ -10,6 +10,7 @@ import pytest
 import yaml
 from hypothesis import given, settings
 
+from analysis.budget import Budget
 from analysis.coverability import coverability
 from analysis.structural import classify, incidence, structural_boundedness
 from coral_lang.net import Net
@@ -101,12 +102,13 @@ def _max_per_place(net: Net, states: list[tuple[int, ...]]) -> dict[str, int]:
     return {p.name: max(m[i] for m in states) for i, p in enumerate(net.places)}
 
 
+@pytest.mark.slow
 @settings(max_examples=150)
 @given(small_nets())
 def test_lp_bounds_are_sound_and_structural_boundedness_implies_bounded(net: Net) -> None:
-    result = structural_boundedness(net, timeout_ms=5_000)
+    result = structural_boundedness(net, query_seconds=5.0)
     if result.structurally_bounded:
-        km = coverability(net, max_nodes=50_000, time_limit=20)
+        km = coverability(net, max_nodes=50_000, budget=Budget(20.0))
         assert km.bounded is not False
     reference = explore_reference(net, max_states=5_000)
     seen = _max_per_place(net, reference.states)
@@ -155,8 +157,13 @@ def test_classification_matches_mcc_structural_properties(model: dict[str, Any])
 
 def test_per_place_time_limit_keeps_the_global_bounds() -> None:
     ticks = iter(range(1_000))
-    result = structural_boundedness(mutex(), time_limit=0.5, clock=lambda: float(next(ticks)))
-    assert result.structurally_bounded is True and "time limit" in result.reason
+    # The clock reads 0 (the budget), 1 (the function's slice of it), 2 (the global LP's
+    # time-out: 1.5 s left), 3 (before the first place: in time), 4 (its time-out),
+    # 5 (before the second place: past the deadline).
+    budget = Budget(3.5, clock=lambda: float(next(ticks)))
+    result = structural_boundedness(mutex(), budget=budget)
+    assert result.structurally_bounded is True
+    assert "per-place bounds stopped: time limit of 3.5 s reached after 1 place" in result.reason
     # The global weighting still bounds every place, just less tightly.
     assert set(result.bounds) == set(mutex().place_names)
 
@@ -167,7 +174,7 @@ def test_public_surface_of_the_structural_modules() -> None:
 
     expected = {
         "analysis.structural": {
-            "DEFAULT_TIMEOUT_MS",
+            "DEFAULT_QUERY_SECONDS",
             "MAX_DENSE_CELLS",
             "Incidence",
             "NetClass",

@@ -47,6 +47,7 @@ def test_visible_places_keep_their_interleavings() -> None:
     assert {(m[0], m[1]) for m in reduced.markings.tolist()} == {(0, 0), (0, 1), (1, 0), (1, 1)}
 
 
+@pytest.mark.slow
 @settings(max_examples=300)
 @given(small_nets())
 def test_reduction_keeps_every_deadlock(net: Net) -> None:
@@ -81,6 +82,7 @@ def _holds(places: list[int], levels: list[int]) -> Any:
     return predicate
 
 
+@pytest.mark.slow
 @settings(max_examples=300)
 @given(small_nets(), st.data())
 def test_reduction_keeps_reachability_of_visible_predicates(net: Net, data: st.DataObject) -> None:
@@ -118,6 +120,7 @@ def _slow(name: str) -> Any:
     return pytest.param(name, marks=marks, id=name)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", [_slow(n) for n in POR_MODELS])
 def test_deadlock_verdicts_match_the_oracle_on_conformance_models(name: str) -> None:
     net = read_pnml(CONFORMANCE / MODELS[name]["pnml"])
@@ -127,6 +130,7 @@ def test_deadlock_verdicts_match_the_oracle_on_conformance_models(name: str) -> 
     assert reduced.has_deadlock == MODELS[name]["deadlock"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", [_slow(n) for n in VISIBLE_MODELS])
 def test_place_predicates_match_the_full_search_on_conformance_models(name: str) -> None:
     full = _full(name)

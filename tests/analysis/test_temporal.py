@@ -65,8 +65,8 @@ def run(path: str, *options: str) -> tuple[int, dict[str, Any]]:
     """Exit code and ``{key: property}`` of ``coral-check verify`` in JSON."""
     out = Path(path).with_suffix(".json")
     code = main(["verify", path, "--format", "json", "--no-structure", "-o", str(out), *options])
-    report = json.loads(out.read_text())
-    return code, {p["key"]: p for p in report["properties"]}
+    (checked,) = json.loads(out.read_text())["files"]
+    return code, {p["key"]: p for p in checked["report"]["properties"]}
 
 
 def lines(steps: list[dict[str, Any]]) -> list[int]:

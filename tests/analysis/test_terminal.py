@@ -7,8 +7,15 @@ import io
 import pytest
 
 from analysis.outcome import FileOutcome, make_outcome
+from analysis.pipeline import CheckOptions, check_file
 from analysis.report import Verdict
-from analysis.terminal import render_diagnostic, render_run, summary_line, use_color
+from analysis.terminal import (
+    render_diagnostic,
+    render_report,
+    render_run,
+    summary_line,
+    use_color,
+)
 from analysis.verify import VerifyOptions, verify
 from coral_lang import compile_file
 from coral_lang.diagnostics import Diagnostic, Severity, Span
@@ -79,3 +86,23 @@ def test_quiet_keeps_only_problems() -> None:
     quiet = render_run([pool, deadlock], lint_only=False, quiet=True)
     assert "pool_mission" not in quiet and "faulty_deadlock" in quiet and "files:" not in quiet
     assert render_run([pool], lint_only=False, quiet=True) == ""
+
+
+def test_a_part_says_which_mission_it_was_checked_with() -> None:
+    part = EXAMPLES / "pool_mission" / "abort.coral"
+    outcome = check_file(part, CheckOptions())
+    assert outcome.status() == "part"
+    line = summary_line(outcome, lint_only=True)
+    assert line.startswith(f"{part}: ok as a part of ") and "pool_mission.coral" in line
+    assert "verified when it is checked" in line
+    assert render_run([outcome], lint_only=False).endswith(line + "\n")
+
+
+def test_the_report_in_a_run_locates_its_findings() -> None:
+    path = EXAMPLES / "faulty" / "dead_transition.coral"
+    outcome = check_file(path, CheckOptions(verify=VerifyOptions(structural=False)))
+    assert outcome.net is not None
+    span = outcome.net.transition("record_dock").span
+    assert f"{span}: transition 'record_dock' can never fire" in render_report(outcome)
+    assert render_report(outcome) in render_run([outcome], lint_only=False)
+    assert render_report(FileOutcome("x", input_error="gone")) == ""

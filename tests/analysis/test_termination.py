@@ -297,7 +297,7 @@ def test_every_deadlock_is_listed_up_to_the_limit_with_the_rest_counted(
     out = tmp_path / "r.json"
     args = ["verify", str(FAULTY / "deadlock.coral"), "--no-structure", "--format", "json"]
     assert main([*args, "--max-deadlocks", "2", "-o", str(out)]) == 1
-    data = json.loads(out.read_text())
+    data = json.loads(out.read_text())["files"][0]["report"]
     (deadlock,) = [p for p in data["properties"] if p["key"] == "deadlock"]
     assert len(deadlock["more_evidence"]) == 1 and deadlock["omitted"] == len(stuck) - 2
     assert deadlock["required"] is True and deadlock["evidence"]["trace"]
@@ -339,6 +339,7 @@ def test_sarif_has_one_result_per_deadlock_and_marks_the_loop() -> None:
 # -- incomplete state spaces ---------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_never_proven_from_an_incomplete_search() -> None:
     net = compile_mission(EXAMPLES / "pool_mission" / "pool_mission.coral")
     report = verify(net, VerifyOptions(structural=False, max_states=10))
@@ -564,6 +565,7 @@ def _verdicts(report_properties: list[PropertyResult]) -> dict[str, PropertyResu
     return {p.key: p for p in report_properties}
 
 
+@pytest.mark.slow
 @given(mission_nets(), st.data())
 @settings(max_examples=200, deadline=None)
 def test_verdicts_agree_with_brute_force(net: Net, data: st.DataObject) -> None:
@@ -630,6 +632,7 @@ def test_verdicts_agree_with_brute_force(net: Net, data: st.DataObject) -> None:
         assert deadlock.verdict is Verdict.PROVEN
 
 
+@pytest.mark.slow
 @given(mission_nets())
 @settings(max_examples=60, deadline=None)
 def test_fair_components_agree_with_fair_sccs_and_both_search_paths_agree(net: Net) -> None:

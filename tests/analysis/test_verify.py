@@ -65,6 +65,7 @@ def test_faulty_deadlock_has_shortest_trace_with_replies_and_lines() -> None:
         )
 
 
+@pytest.mark.slow
 def test_faulty_unbounded_names_the_place_with_a_pumping_loop() -> None:
     report = verify(compile_mission(FAULTY / "unbounded.coral"), FAST)
     bounded = report.property("bounded")
@@ -146,6 +147,7 @@ def test_no_final_reachable_is_violated() -> None:
     assert report.property("final_reachable").verdict is Verdict.VIOLATED
 
 
+@pytest.mark.slow
 def test_inconclusive_when_neither_search_nor_state_equation_decides() -> None:
     net = read_pnml(CONFORMANCE / "pnml" / "LamportFastMutEx-PT-2.pnml")
     report = verify(net, VerifyOptions(max_states=5, structural=False))
@@ -159,6 +161,7 @@ ORACLE = yaml.safe_load((CONFORMANCE / "oracle.yaml").read_text())
 SMALL = [m for m in ORACLE["models"] if m["states"] <= 20_000]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", SMALL, ids=[m["model"] for m in SMALL])
 def test_verify_agrees_with_the_conformance_oracle(model: dict[str, object]) -> None:
     net = read_pnml(CONFORMANCE / str(model["pnml"]))
@@ -174,6 +177,7 @@ def test_verify_agrees_with_the_conformance_oracle(model: dict[str, object]) -> 
         assert dead is (Verdict.PROVEN if model["quasi_live"] else Verdict.VIOLATED)
 
 
+@pytest.mark.slow
 @given(small_nets())
 @settings(max_examples=60)
 def test_verify_never_contradicts_the_reference_explorer(net: Net) -> None:
@@ -203,19 +207,20 @@ def test_verify_never_contradicts_the_reference_explorer(net: Net) -> None:
         assert not any(net.enabled(marking, t) for t in net.transitions)
 
 
+@pytest.mark.slow
 def test_cli_verify_json_schema_and_exit_codes(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "report.json"
     assert main(["verify", str(POOL), "--format", "json", "-o", str(out)]) == 0
-    data = json.loads(out.read_text())
+    data = json.loads(out.read_text())["files"][0]["report"]
     assert set(data["statespace"]) >= {"states", "edges", "max_tokens_place", "max_tokens_marking"}
     assert set(data["deadlock"]) >= {"verdict", "trace"} and data["deadlock"]["verdict"] == "proven"
     assert set(data["bounded"]) >= {"verdict", "unbounded_places"}
     assert (
         main(["verify", str(FAULTY / "unbounded.coral"), "--format", "json", "--no-structure"]) == 1
     )
-    data = json.loads(capsys.readouterr().out)
+    data = json.loads(capsys.readouterr().out)["files"][0]["report"]
     assert data["bounded"] == {
         "verdict": "violated",
         "method": "Karp-Miller coverability tree",
@@ -282,6 +287,7 @@ def test_run_verification_keeps_the_state_space_of_its_report() -> None:
     ]
 
 
+@pytest.mark.slow
 def test_structural_boundedness_comes_from_covering_invariants_without_z3() -> None:
     net = compile_mission(EXAMPLES / "pool_mission" / "pool_mission.coral")
     structure = verify(net).structure

@@ -25,6 +25,7 @@ def _bench(*argv: str, timeout: float) -> subprocess.CompletedProcess[str]:
     )
 
 
+@pytest.mark.slow
 def test_redteam_tiny_campaign_has_every_class_and_no_failure(tmp_path: Path) -> None:
     done = _bench(
         "bench/redteam.py", "--per-class", "2", "--seed", "7", "--out", str(tmp_path), timeout=120

@@ -8,9 +8,12 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 from tests.conftest import REPO
 
 
+@pytest.mark.slow
 def test_watch_bench_tiny_run_prints_three_rates_and_the_ratio() -> None:
     argv = ["bench/watch.py", "--chains", "2", "--length", "6", "--rounds", "1"]
     done = subprocess.run(

@@ -366,6 +366,14 @@ TABLE: list[tuple[str, str]] = [
         "4:11: too many operator inputs: 'i9' would be number 9, at most 8 are supported "
         "[CORAL010]",
     ),
+    (
+        HEADER + "place a\n# coral: part of m.coral\n",
+        "4:1: '# coral: part of' must come before the file's first declaration [CORAL011]",
+    ),
+    (
+        "mission m\nvehicle ROMEO\nplace start = 1 done\n",
+        "3:17: expected ',' between places (or a unit after the number: s, min, ...) [CORAL001]",
+    ),
 ]
 
 

@@ -61,6 +61,7 @@ def nets_and_markings(draw: st.DrawFn) -> tuple[Net, list[tuple[int, ...]]]:
     return net, markings
 
 
+@pytest.mark.slow
 @given(nets_and_markings())
 @settings(max_examples=200, deadline=None)
 def test_projected_finals_accept_exactly_the_expanded_final_markings(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import time
 from pathlib import Path
@@ -10,9 +11,11 @@ from typing import Any
 import pytest
 import yaml
 from defusedxml import ElementTree as SafeET
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from coral_lang import ast
+from coral_lang.compiler import compile_source
 from coral_lang.diagnostics import PnmlError, Span
 from coral_lang.net import (
     Assertion,
@@ -26,8 +29,10 @@ from coral_lang.net import (
     TransitionKind,
 )
 from coral_lang.pnml import PNML_NAMESPACE, PTNET_TYPE, parse_pnml, read_pnml, to_pnml, write_pnml
+from coral_lang.printer import format_mission
 from tests.analysis.strategies import small_nets
 from tests.conftest import CONFORMANCE
+from tests.coral_lang.strategies import missions
 
 PNML_DIR = CONFORMANCE / "pnml"
 ORACLE: list[dict[str, Any]] = yaml.safe_load((CONFORMANCE / "oracle.yaml").read_text())["models"]
@@ -84,6 +89,7 @@ def model(request: pytest.FixtureRequest) -> tuple[dict[str, Any], Net]:
     return entry, read_pnml(CONFORMANCE / entry["pnml"])
 
 
+@pytest.mark.slow
 def test_conformance_model_matches_oracle_net_stats(model: tuple[dict[str, Any], Net]) -> None:
     entry, net = model
     expected = {key: entry["net_stats"][key] for key in stats(net)}
@@ -91,6 +97,7 @@ def test_conformance_model_matches_oracle_net_stats(model: tuple[dict[str, Any],
     assert net.name == entry["model"]
 
 
+@pytest.mark.slow
 def test_conformance_model_survives_export_and_import(model: tuple[dict[str, Any], Net]) -> None:
     _, net = model
     again = parse_pnml(to_pnml(net))
@@ -105,6 +112,46 @@ def test_conformance_model_survives_export_and_import(model: tuple[dict[str, Any
 @given(small_nets())
 def test_random_nets_survive_a_round_trip(net: Net) -> None:
     assert parse_pnml(to_pnml(net)) == net
+
+
+@pytest.mark.slow
+@given(missions())
+@settings(max_examples=15, deadline=None)
+def test_compiled_missions_survive_a_round_trip_with_their_digest(mission: ast.Mission) -> None:
+    """Mission nets exercise every coral block the writer makes (kinds, commands with typed
+    parameters, spans, finals, assertions); only temporal assertions stay behind."""
+    net = compile_source(format_mission(mission), "gen.coral").raise_for_errors()
+    exported = dataclasses.replace(
+        net, assertions=tuple(a for a in net.assertions if not a.temporal)
+    )
+    again = parse_pnml(to_pnml(net))
+    assert again == exported
+    assert again.digest() == exported.digest()
+
+
+def test_a_requirement_travels_and_an_unknown_one_is_refused() -> None:
+    """``require termination`` changes what a certificate must prove (and the digest):
+    losing it on the way through PNML would weaken the check of the net read back."""
+    net = dataclasses.replace(mission_net(), requirements=("termination",))
+    text = to_pnml(net)
+    again = parse_pnml(text)
+    assert again.requirements == ("termination",) and again.digest() == net.digest()
+    forged = text.replace('<require name="termination"', '<require name="terminaton"')
+    with pytest.raises(PnmlError, match=r"unknown requirement 'terminaton'.*did you mean"):
+        parse_pnml(forged, "forged.pnml")
+
+
+def test_the_document_is_laid_out_one_element_a_line() -> None:
+    """The writer indents (``ET.indent``): a diff of two exports reads element by element."""
+    text = to_pnml(mission_net())
+    lines = text.splitlines()
+    assert lines[0] == '<?xml version="1.0" encoding="UTF-8"?>'
+    assert lines[1] == f'<pnml xmlns="{PNML_NAMESPACE}">'
+    assert all(line.startswith("  ") for line in lines[2:-1]) and lines[-1] == "</pnml>"
+    assert text.endswith("</pnml>\n")
+    assert sum("<toolspecific" in line for line in lines) == 7  # net, 4 places, 2 transitions
+    # Every element starts on a line of its own.
+    assert all(line.strip().startswith("<") for line in lines)
 
 
 # Names a mission never has but a Net may: spaces, quotes, markup, leading digits, unicode.
@@ -495,6 +542,7 @@ def _reference_chain(length: int, *, cycle: bool = False) -> str:
     )
 
 
+@pytest.mark.slow
 def test_a_long_reference_chain_resolves_in_one_pass() -> None:
     text = _reference_chain(20_000)
     start = time.perf_counter()
@@ -503,6 +551,7 @@ def test_a_long_reference_chain_resolves_in_one_pass() -> None:
     assert dict(net.transitions[0].inputs) == {"p": 1}
 
 
+@pytest.mark.slow
 def test_a_long_reference_cycle_is_refused_naming_the_node() -> None:
     with pytest.raises(PnmlError) as caught:
         parse_pnml(_reference_chain(20_000, cycle=True), "cycle.pnml")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from coral_lang.diagnostics import ProfileError
+from coral_lang.diagnostics import MAX_PROFILE_ERRORS_SHOWN, ProfileError
 from coral_lang.profile import (
     SPACE_TRAP_SIGNALS,
     load_bundled_profile,
@@ -233,3 +233,66 @@ def test_example_vehicle_profiles_load(file: str, vehicle: str, untracked_query:
     for command in profile.commands:
         if command.kind == "query":
             assert command.param("time_out") is not None, command.name
+
+
+THREE_MISTAKES = """\
+vehicle: BOT
+resources: [depth]
+commands:
+  DEPTH:
+    kind: taks
+    replies: [ack, error]
+  DEPTH?:
+    kind: query
+    params:
+      - {name: z, type: float, unit: m}
+      - {name: time_out, type: float, unit: furlong}
+    replies: [done, timeout]
+  DIVE:
+    kind: task
+    replies: [ack]
+    duration_s: -1
+"""
+
+
+def test_every_mistake_of_a_profile_is_reported_each_at_its_field() -> None:
+    with pytest.raises(ProfileError) as caught:
+        parse_profile(THREE_MISTAKES, "bot.yaml")
+    error = caught.value
+    assert str(error).splitlines() == [
+        "bot.yaml:5:11: commands.DEPTH.kind: kind must be one of task, query, action, not 'taks'",
+        "bot.yaml:11:45: commands.DEPTH?.params[1].unit: unknown unit 'furlong'",
+        "bot.yaml:16:17: commands.DIVE.duration_s: duration must be >= 0 seconds",
+    ]
+    assert [e.path for e in error.errors] == [
+        "commands.DEPTH.kind",
+        "commands.DEPTH?.params[1].unit",
+        "commands.DIVE.duration_s",
+    ]
+    assert (error.path, error.detail) == (error.errors[0].path, error.errors[0].detail)
+
+
+def test_a_mistake_that_others_depend_on_is_reported_once() -> None:
+    # An unknown kind: whether the command is a query (and needs a time_out) is unknown,
+    # so only the kind is reported; a second unknown field in the same mapping is not lost.
+    text = THREE_MISTAKES.replace("kind: query", "kind: qeury").replace(
+        "replies: [ack]\n", "replies: [ack]\n    duraton_s: 1\n"
+    )
+    with pytest.raises(ProfileError) as caught:
+        parse_profile(text.replace("unit: furlong", "unit: s"), "bot.yaml")
+    assert [e.path for e in caught.value.errors] == [
+        "commands.DEPTH.kind",
+        "commands.DEPTH?.kind",
+        "commands.DIVE.duraton_s",
+        "commands.DIVE.duration_s",
+    ]
+
+
+def test_a_profile_with_hundreds_of_mistakes_lists_the_first_ones_and_counts_the_rest() -> None:
+    commands = "".join(f"  C{i}: {{kind: bad, replies: [ack]}}\n" for i in range(300))
+    with pytest.raises(ProfileError) as caught:
+        parse_profile("vehicle: BOT\ncommands:\n" + commands, "bot.yaml")
+    assert len(caught.value.errors) == 300
+    lines = str(caught.value).splitlines()
+    assert len(lines) == MAX_PROFILE_ERRORS_SHOWN + 1
+    assert lines[0].startswith("bot.yaml:3:") and lines[-1] == "... and 250 more errors"

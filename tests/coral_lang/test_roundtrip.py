@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -15,6 +16,7 @@ from tests.coral_lang.strategies import missions
 POOL = (EXAMPLES / "pool_mission" / "go_to_operating_site.coral").read_text()
 
 
+@pytest.mark.slow
 @given(missions())
 @settings(max_examples=150)
 def test_printed_mission_parses_back_to_the_same_tree(mission: object) -> None:
@@ -24,6 +26,7 @@ def test_printed_mission_parses_back_to_the_same_tree(mission: object) -> None:
     assert parsed == mission
 
 
+@pytest.mark.slow
 @given(missions())
 @settings(max_examples=100)
 def test_generated_missions_compile_and_reprint_to_the_same_net(mission: object) -> None:
@@ -44,6 +47,7 @@ def _compiles_without_crashing(text: str) -> None:
         assert any(d.severity is Severity.ERROR for d in result.diagnostics)
 
 
+@pytest.mark.slow
 @given(st.text(max_size=300))
 @settings(max_examples=300)
 def test_arbitrary_text_gives_diagnostics_not_exceptions(text: str) -> None:
@@ -59,6 +63,7 @@ _ALPHABET = st.sampled_from(
 )
 
 
+@pytest.mark.slow
 @given(st.integers(0, len(POOL)), st.integers(0, 40), st.lists(_ALPHABET, max_size=6))
 @settings(max_examples=300)
 def test_damaged_real_mission_gives_diagnostics_not_exceptions(

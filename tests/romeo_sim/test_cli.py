@@ -56,12 +56,51 @@ def test_a_key_file_others_can_read_is_refused(
 
 
 def test_help_says_to_prefer_the_key_file(capsys: pytest.CaptureFixture[str]) -> None:
-    with pytest.raises(SystemExit):
-        main(["serve", "--help"])
+    assert main(["serve", "--help"]) == 0
     out = " ".join(capsys.readouterr().out.split())
     assert "prefer --key-file" in out and "--log FILE" in out
 
 
+def test_the_usage_line_lists_the_subcommands(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--help"]) == 0
+    assert capsys.readouterr().out.startswith("usage: romeo-sim [-h] [--version] {mission,serve}")
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.startswith("romeo-sim (coral ")
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--bogus"], "error:"),  # argparse's SystemExit escaped main before the frame
+        ([], "the following arguments are required: command"),
+        (["mission", "--bogus"], "unrecognized arguments: --bogus"),
+        (["mission", "--seed", "-1"], "a seed is 0 .. 2**63-1, got -1"),  # numpy's refusal
+        (["serve", "--port", "x"], "expected a port in 0..65535, got 'x'"),
+        (["serve", "--port", "65536"], "expected a port in 0..65535"),
+        (["serve", "--speed", "0"], "argument --speed: must be more than 0"),
+        (["serve", "--speed", "inf"], "not a finite number: 'inf'"),
+        (["serve", "--duration", "-0.5"], "argument --duration: must be 0 or more"),
+        (["serve", "--key-hex", "00", "--key-file", "k"], "not allowed with argument"),
+    ],
+)
+def test_misuse_returns_2_with_a_message(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(argv) == 2  # returned, never raised
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_an_out_folder_that_cannot_be_made_is_bad_input(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    assert main(["mission", "--out", str(blocker / "sub"), "--no-plots"]) == 2
+    assert f"romeo-sim: cannot write to {blocker / 'sub'}" in capsys.readouterr().err
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
 def test_serve_writes_its_log_named_after_the_mission_id(
     tmp_path: Path, key: Path, stop: signal.Signals

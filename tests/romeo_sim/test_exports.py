@@ -52,6 +52,7 @@ def test_romeo_sim_imports_only_the_allowed_parts_of_coral() -> None:
                 if top in ("coral_lang", "analysis", "runtime"):
                     assert name.startswith("runtime.vehicle.") or name in (
                         "coral_lang.profile",
+                        "coral_lang.cliframe",
                         "runtime.protocol",
                         "runtime.telemetry",
                         "runtime.keys",

@@ -9,6 +9,7 @@ no later than the first step after its time-out; later replies come in time orde
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -46,6 +47,7 @@ def commands(draw: st.DrawFn) -> tuple[str, dict[str, float | int | str]]:
     return name, params
 
 
+@pytest.mark.slow
 @settings(max_examples=60)
 @given(
     st.lists(

@@ -211,6 +211,7 @@ def test_kill_9_then_resume_against_the_generic_served_vehicle(tmp_path: Path, k
     assert int(stats.group(2)) >= 1  # LINE_END? #6, in flight at the kill, was re-sent
 
 
+@pytest.mark.slow
 def test_coral_vehicle_refuses_bad_input_without_a_traceback(tmp_path: Path, key: Path) -> None:
     base = [str(BIN / "coral-vehicle"), "serve", "--key-file", str(key)]
     cases = {

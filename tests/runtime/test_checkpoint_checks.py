@@ -90,6 +90,7 @@ def test_a_consistent_but_unreachable_marking_is_refused(
     check_verified_state(net, engine.marking)  # the initial marking is fine
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None)
 @given(replies=st.integers(0, 12))
 def test_every_checkpoint_the_engine_commits_passes_the_checks(

@@ -117,6 +117,7 @@ def check_nothing_lost(run: Run, net: Net) -> None:
     assert net.marking_dict(marking) == run.result.marking
 
 
+@pytest.mark.slow
 def test_the_pool_mission_completes_over_the_genoa_lisbon_link(
     pool: tuple[Net, CertificateCheck], tmp_path: Path
 ) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -221,8 +222,16 @@ def test_the_gate_refuses_a_certificate_of_another_net(tmp_path: Path) -> None:
     net = compile_text(TWO_BRANCHES)
     approval = approve(net, tmp_path)
     changed = compile_text(TWO_BRANCHES.replace("z = 1.0", "z = 1.5"))
-    with pytest.raises(EngineError, match="coral-check verify MISSION --certificate"):
+    with pytest.raises(EngineError, match="coral-check verify MISSION --certificate") as generic:
         Engine(changed, approval)
+    assert f"--certificate {approval.path}'" in str(generic.value)  # the certificate is known
+    named = replace(approval, mission="my missions/two.coral")
+    with pytest.raises(EngineError) as refused:
+        Engine(changed, named)
+    assert (
+        f"run 'coral-check verify 'my missions/two.coral' --certificate {approval.path}' "
+        "on the mission as it is now" in str(refused.value)
+    )
     with pytest.raises(EngineError, match="check_certificate"):
         Engine(net, object())  # type: ignore[arg-type]
 

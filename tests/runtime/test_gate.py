@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from analysis.certificate import CertificateError, make_certificate, write_certificate
+from analysis.outcome import FileOutcome
 from analysis.signing import TrustStore, sign_certificate
 from analysis.verify import VerifyOptions, verify
 from coral_lang import CompileError, load_mission, load_profile
@@ -214,3 +215,35 @@ def test_the_gate_refuses_a_revoked_signer_and_a_known_unsound_revision(
     write_certificate(sign_certificate(old, signing_key.key), pump_cert)
     with pytest.raises(CertificateError, match=r"explorer-64-bit-wrap.*re-verify"):
         approve_mission(pump, pump_cert, trusted=signing_key.trusted)
+
+
+def test_issuing_verifies_through_the_check_pipeline(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``coral-run --verify`` and ``coral-check verify`` reach their verdict through
+    one path (`analysis.pipeline.check_file`), so they cannot disagree on a file."""
+    import analysis.pipeline
+
+    seen: list[tuple[Path, analysis.pipeline.CheckOptions]] = []
+    real = analysis.pipeline.check_file
+
+    def spy(file: str | Path, options: analysis.pipeline.CheckOptions) -> FileOutcome:
+        seen.append((Path(file), options))
+        return real(file, options)
+
+    monkeypatch.setattr(analysis.pipeline, "check_file", spy)
+    minnow = load_profile(MINNOW)
+    issued = approve_mission(
+        SURVEY, tmp_path / "c.json", issue=True, profiles=[minnow], trusted=NOBODY
+    )
+    ((file, options),) = seen
+    assert file == SURVEY and list(options.profiles) == [minnow]
+    assert options.verify is not None
+    outcome = real(SURVEY, options)
+    assert outcome.report is not None and outcome.net is not None
+    assert issued.net.digest() == outcome.net.digest() == issued.approval.net_digest
+    # A mission that fails verification names what failed, as before.
+    faulty = EXAMPLES / "faulty" / "deadlock.coral"
+    with pytest.raises(CertificateError, match=r"verification did not pass \(deadlock violated"):
+        approve_mission(faulty, tmp_path / "d.json", issue=True, trusted=NOBODY)
+    assert [f for f, _ in seen] == [SURVEY, faulty]

@@ -140,6 +140,7 @@ def run(
 # --------------------------------------------------------------------------- engine level
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(MISSIONS))
 @settings(max_examples=150)
 @given(schedule=schedules(), policy=POLICIES, seed=ENGINE_SEEDS)
@@ -152,6 +153,7 @@ def test_refinement_every_marking_and_firing_is_in_the_verified_graph(
     assert tuple(mission(name).net.marking_from(result.marking)) == checker.marking
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", DEADLOCK_FREE)
 @settings(max_examples=200)
 @given(schedule=schedules(), policy=POLICIES, seed=ENGINE_SEEDS)
@@ -162,6 +164,7 @@ def test_a_mission_verified_deadlock_free_always_reaches_a_final_marking(
     assert result.outcome is Outcome.FINAL, (result.marking, result.trace)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CONFLICT_FREE)
 @settings(max_examples=200)
 @given(schedule=schedules(), policy=POLICIES, seed=ENGINE_SEEDS)
@@ -173,6 +176,7 @@ def test_a_mission_verified_conflict_free_never_drives_one_resource_twice(
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(set(MISSIONS) - set(CONFLICT_FREE)))
 def test_where_analysis_reports_a_conflict_a_schedule_shows_it(name: str) -> None:
     """The conflict property has teeth: where analysis reports a conflict, hypothesis
@@ -187,6 +191,7 @@ def test_where_analysis_reports_a_conflict_a_schedule_shows_it(name: str) -> Non
     assert conflicts(found)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(MISSIONS))
 @settings(max_examples=100)
 @given(schedule=schedules(), policy=POLICIES, seed=ENGINE_SEEDS)
@@ -366,10 +371,14 @@ def _machine(name: str, policy: Policy) -> type[EngineAgainstReference]:
     )
 
 
+# The pool mission's machines take seconds each: `make test` runs them, `make check`
+# (the inner loop) keeps the two small nets, which exercise the same comparison.
 TestPoolPriority = _machine("pool", Policy.PRIORITY).TestCase
 TestPoolPriority.settings = MACHINE_SETTINGS
+TestPoolPriority.pytestmark = [pytest.mark.slow]  # type: ignore[attr-defined]
 TestPoolRandom = _machine("pool", Policy.RANDOM).TestCase
 TestPoolRandom.settings = MACHINE_SETTINGS
+TestPoolRandom.pytestmark = [pytest.mark.slow]  # type: ignore[attr-defined]
 TestRacyPriority = _machine("racy", Policy.PRIORITY).TestCase
 TestRacyPriority.settings = MACHINE_SETTINGS
 TestConflictRandom = _machine("conflict", Policy.RANDOM).TestCase
@@ -411,6 +420,7 @@ NETWORK_SETTINGS = settings(
 )
 
 
+@pytest.mark.slow
 @NETWORK_SETTINGS
 @given(
     name=st.sampled_from(["pool", "racy"]),

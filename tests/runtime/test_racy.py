@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import io
 from contextlib import redirect_stdout
+from pathlib import Path
 
 import pytest
 from hypothesis import Phase, find, given, settings
@@ -30,8 +31,6 @@ from hypothesis import strategies as st
 from hypothesis.errors import NoSuchExample
 
 from analysis.cli import main as coral_check
-from romeo_sim.config import VehicleConfig, default_config
-from romeo_sim.vehicle import Vehicle
 from runtime.controller import RunEnd
 from runtime.engine import Outcome, Policy
 from runtime.fuzz import FuzzOptions, run_one
@@ -63,15 +62,17 @@ def deadlocks(schedule: Schedule) -> bool:
     return run("racy", schedule).outcome is Outcome.DEADLOCK
 
 
-def heading_at_90() -> VehicleConfig:
-    """ROMEO already facing 90 degrees, as the racy mission's author assumed."""
-    config = default_config()
-    return dataclasses.replace(config, initial=dataclasses.replace(config.initial, psi_deg=90.0))
+FACING_90 = "initial:\n  psi_deg: 90.0\n"
+"""A ROMEO vehicle file (docs/sim.md): the bundled vehicle, already facing 90 degrees,
+as the racy mission's author assumed. A file rather than a vehicle built in code, so the
+fuzz options stay plain data (`FuzzOptions` pickles)."""
 
 
-def romeo_facing_90(seed: int) -> Vehicle:
-    """The simulated ROMEO of `heading_at_90`, for `FuzzOptions.vehicle_factory`."""
-    return Vehicle(heading_at_90(), seed=seed)
+@pytest.fixture(scope="module")
+def facing_90(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("vehicle") / "facing90.yaml"
+    path.write_text(FACING_90, encoding="utf-8")
+    return path
 
 
 @pytest.fixture(scope="module")
@@ -101,6 +102,7 @@ def test_nominal_timing_hides_the_race() -> None:
     assert result.outcome is Outcome.FINAL and result.marking == {"on_station": 1}
 
 
+@pytest.mark.slow
 def test_hypothesis_finds_the_race_and_shrinks_it_to_what_matters(shrunk: Schedule) -> None:
     result = run("racy", shrunk)
     assert result.outcome is Outcome.DEADLOCK
@@ -135,6 +137,7 @@ def test_the_runtime_dead_marking_is_one_analysis_predicts(shrunk: Schedule) -> 
     assert not racy.net.is_final(racy.net.marking_from(result.marking))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("marking", RACE_MARKINGS, ids=["depth_acked", "depth_failed"])
 def test_every_dead_marking_analysis_predicts_is_reached_by_some_schedule(
     marking: dict[str, int],
@@ -146,6 +149,7 @@ def test_every_dead_marking_analysis_predicts_is_reached_by_some_schedule(
     assert run("racy", found).outcome is Outcome.DEADLOCK
 
 
+@pytest.mark.slow
 def test_the_same_search_finds_nothing_wrong_with_the_pool_mission() -> None:
     def fails(schedule: Schedule) -> bool:
         return run("pool", schedule).outcome is not Outcome.FINAL
@@ -165,7 +169,7 @@ def test_the_pool_mission_never_fails_where_the_racy_one_may(
 # --------------------------------------------------------------------------- simulator
 
 
-def test_the_race_shows_in_the_simulator_over_a_hostile_link() -> None:
+def test_the_race_shows_in_the_simulator_over_a_hostile_link(facing_90: Path) -> None:
     """HEADING? goes first (random policy) and LRM's command is stalled past the 5 s the
     vehicle needs to confirm the heading: LRM's refusal comes too late."""
     racy = mission("racy")
@@ -173,7 +177,7 @@ def test_the_race_shows_in_the_simulator_over_a_hostile_link() -> None:
         runs=1,
         seed=HOSTILE_RACE_SEED,
         link=BUILTIN_PROFILES["hostile"],
-        vehicle_factory=romeo_facing_90,
+        sim_config=facing_90,
     )
     result = run_one(racy.net, racy.approval, HOSTILE_RACE_SEED, options, keep_events=True)
     assert result.end is RunEnd.DEADLOCK
@@ -195,12 +199,12 @@ def test_with_the_bundled_vehicle_the_race_cannot_show() -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("profile", ["hostile", "genoa-lisbon"])
 def test_the_pool_mission_never_fails_in_the_simulator_where_the_racy_one_does(
-    profile: str,
+    profile: str, facing_90: Path
 ) -> None:
     pool = mission("pool")
     for seed in range(HOSTILE_RACE_SEED - 2, HOSTILE_RACE_SEED + 2):
         options = FuzzOptions(
-            runs=1, seed=seed, link=BUILTIN_PROFILES[profile], vehicle_factory=romeo_facing_90
+            runs=1, seed=seed, link=BUILTIN_PROFILES[profile], sim_config=facing_90
         )
         result = run_one(pool.net, pool.approval, seed, options, keep_events=True)
         check_run("pool", result)

@@ -34,6 +34,7 @@ from runtime.controller import Controller, ControllerOptions, RunEnd, RunResult
 from runtime.engine import Engine, EngineError, EngineSpin, Outcome, Policy, find_cycle
 from runtime.eventlog import EventLog
 from runtime.fuzz import FuzzOptions, format_report, fuzz
+from runtime.fuzz import one_run as fuzz_one_run
 from runtime.link import BUILTIN_PROFILES, Connection, LinkEmulator, MemoryLink
 from runtime.vclock import run_virtual
 from tests.runtime.helpers import compile_text
@@ -347,6 +348,7 @@ def spinning(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_coral_run_ends_a_spin_as_a_failed_mission_with_plots(
     spinning: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -374,7 +376,9 @@ def test_coral_run_ends_a_spin_as_a_failed_mission_with_plots(
 @pytest.fixture
 def quick_spin(monkeypatch: pytest.MonkeyPatch) -> None:
     """Fuzz's engines give up after 1,000 firings (the default million is slow to spin)."""
-    monkeypatch.setattr(fuzz_module, "Engine", functools.partial(Engine, max_firings_per_step=1000))
+    monkeypatch.setattr(
+        fuzz_one_run, "Engine", functools.partial(Engine, max_firings_per_step=1000)
+    )
 
 
 @pytest.mark.usefixtures("quick_spin")
@@ -400,8 +404,8 @@ def test_coral_run_fuzz_reports_a_spin_and_goes_on(
     mission = tmp_path / "spinning.coral"
     mission.write_text(SPINNING, encoding="utf-8")
     out = tmp_path / "fuzz"
-    argv = ["fuzz", str(mission), "--unverified", "--runs", "2", "--seed", "5", "-q"]
-    code = main([*argv, "--link", "lan", "--out", str(out), "--no-plot"])
+    argv = [str(mission), "--unverified", "--runs", "2", "--seed", "5", "-q"]
+    code = fuzz_module.main([*argv, "--link", "lan", "--out", str(out), "--no-plot"])
     captured = capsys.readouterr()
     assert code == 1, captured
     assert "seed 5: spin" in captured.out and "seed 6: spin" in captured.out
@@ -413,7 +417,7 @@ def test_coral_run_fuzz_reports_a_spin_and_goes_on(
     assert all("cycle ping" in r["detail"] for r in report["runs"])
     assert (out / "failures" / "seed-5.sqlite").exists()
     # The replay of a spinning run prints its events and the cycle.
-    code = main(["fuzz", str(mission), "--unverified", "--replay", "6", "--out", str(out)])
+    code = fuzz_module.main([str(mission), "--unverified", "--replay", "6", "--out", str(out)])
     assert code == 1
     replay = capsys.readouterr().out
     assert "engine-spin" in replay and "ended: spin" in replay and "cycle ping" in replay

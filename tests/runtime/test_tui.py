@@ -340,6 +340,7 @@ def test_run_terminal_view_draws_until_stopped_then_leaves_the_last_frame() -> N
     assert "ENDED final at 80.0 s" in out.export_text()
 
 
+@pytest.mark.slow
 @given(
     st.dictionaries(
         st.sampled_from(
@@ -390,6 +391,7 @@ def pool_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder / "run" / "controller.sqlite"
 
 
+@pytest.mark.slow
 def test_watch_log_tui_shows_a_finished_run_to_its_final_marking(pool_log: Path) -> None:
     plain = console(terminal=False)
     assert watch_log_tui(pool_log, console=plain) == 0

@@ -133,6 +133,7 @@ SURVEY = [
 ]
 
 
+@pytest.mark.slow
 def test_minnow_flies_the_survey_over_localhost_sockets(
     example: ModuleType, survey: tuple[Net, CertificateCheck], tmp_path: Path
 ) -> None:
@@ -162,6 +163,7 @@ def test_minnow_flies_the_survey_over_localhost_sockets(
     assert result.telemetry > 20
 
 
+@pytest.mark.slow
 def test_minnow_flies_the_survey_life_size_under_virtual_time(
     example: ModuleType, survey: tuple[Net, CertificateCheck], tmp_path: Path
 ) -> None:

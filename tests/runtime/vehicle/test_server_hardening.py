@@ -129,6 +129,7 @@ async def closed_by_peer(reader: asyncio.StreamReader, seconds: float = WAIT) ->
     return True
 
 
+@pytest.mark.slow
 def test_a_trickling_client_is_closed_at_the_handshake_deadline() -> None:
     """One byte of a real Hello every 50 ms: each read is quick, the handshake never ends."""
     log: list[str] = []
@@ -265,6 +266,7 @@ def test_garbage_is_counted_but_logged_only_a_few_times() -> None:
     assert len(log) <= 12, log
 
 
+@pytest.mark.slow
 def test_a_quiet_adopted_controller_outlives_the_handshake_deadline() -> None:
     log: list[str] = []
 
@@ -403,6 +405,7 @@ LIMITED_SOFT = 28
 listens, so the cap of 16 pending connections would run it out of descriptors."""
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(sys.platform != "linux", reason="counts descriptors in /proc (Linux)")
 def test_under_a_low_descriptor_limit_the_controller_gets_through_a_flood(
     tmp_path: Path,

@@ -130,6 +130,7 @@ async def _text(browser: Browser, selector: str) -> str:
     return str(value)
 
 
+@pytest.mark.slow
 def test_page_follows_a_live_run_and_aborts_it(
     chromium: str, live_run: tuple[LiveRun, Path], tmp_path: Path
 ) -> None:
@@ -181,6 +182,7 @@ def test_page_follows_a_live_run_and_aborts_it(
     assert end[-1].data["marking"] == {"aborted": 1}, end[-1].data
 
 
+@pytest.mark.slow
 def test_viewer_without_the_token_is_refused(
     chromium: str, abort_mission: Path, tmp_path: Path
 ) -> None:

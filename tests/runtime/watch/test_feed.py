@@ -36,6 +36,7 @@ def pool(tmp_path_factory: pytest.TempPathFactory) -> tuple[Net, CertificateChec
     return net, approve(net, tmp_path_factory.mktemp("pool"))
 
 
+@pytest.mark.slow
 def test_the_listener_feed_equals_a_reread_of_the_log(
     pool: tuple[Net, CertificateCheck], tmp_path: Path
 ) -> None:
@@ -154,6 +155,7 @@ def test_rows_logged_from_another_thread_wake_the_loop(tmp_path: Path) -> None:
     asyncio.run(main())
 
 
+@pytest.mark.slow
 def test_a_dropped_listener_marks_the_feed_broken_and_publishes_once(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -310,6 +310,7 @@ def test_slow_failing_and_flooding_operators(tmp_path: Path) -> None:
         log.close()
 
 
+@pytest.mark.slow
 def test_a_stalled_viewer_while_the_engine_logs_a_burst(tmp_path: Path) -> None:
     """One viewer never reads, another reads: 1,000 rows logged in a burst reach the state
     at once, the server publishes a few snapshots, and no slot holds more than one."""

@@ -12,6 +12,7 @@ from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 
 import aiohttp
+import pytest
 
 from runtime.eventlog import EventLog
 from runtime.watch.main import log_info
@@ -35,6 +36,7 @@ async def sse(response: aiohttp.ClientResponse) -> AsyncIterator[dict[str, objec
             yield json.loads(line[len(b"data: ") :])
 
 
+@pytest.mark.slow
 def test_a_finished_log_is_replayed(pool_log: Path) -> None:
     reader = LogReader(pool_log)
     watch = Watch(reader)

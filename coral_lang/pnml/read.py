@@ -1,23 +1,10 @@
-"""PNML (ISO/IEC 15909-2) import and export of place/transition nets.
+"""Reading PNML: a P/T net out of a document another tool wrote.
 
-PNML is how Petri-net tools exchange nets: the Model Checking Contest models, TAPAAL,
-GreatSPN and others all read and write it. coral reads the P/T flavour (net type
-``http://www.pnml.org/version-2009/grammar/ptnet``) into its one `Net` model, so every
-analysis runs on foreign nets unchanged, and writes any `Net` back out so other tools can
-check coral's results.
-
-Reading is defensive because PNML files come from other people's tools: the XML is parsed
-with ``defusedxml`` (no DTD, no entity expansion, no external references), and every fault
-is a `PnmlError` naming the file, line, column, element and id. The format notes (what is
-accepted, what is refused and why) are in ``docs/pnml.md``.
-
-What survives a round trip ``parse_pnml(to_pnml(net))``: places, transitions, arcs with
-their weights, initial markings, labels (stripped of surrounding white space) and every
-name. Mission-only data (place and transition kinds, capacities, commands, replies,
-priorities, resources, spans, final markings, assertions, vehicle, sources) travels in
-``<toolspecific tool="coral" version="1">`` blocks that other tools ignore. Temporal
-assertions (``always``, ``eventually``, ``leadsto``, ``ltl``, ``ctl``) are not
-exported: PNML has no syntax for their formulas.
+Defensive because the files come from other people's tools: the XML goes through the
+hardened parser (`coral_lang.safexml`: no DTD, no entity expansion, no external
+references), and every fault is a `PnmlError` naming the file, line, column, element and
+id. Positions come from expat events, since ElementTree keeps none; that is why this
+side builds its own small element tree instead of using ``xml.etree``.
 """
 
 from __future__ import annotations
@@ -28,7 +15,6 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 from xml.sax import SAXParseException
-from xml.sax.saxutils import escape, quoteattr
 
 from defusedxml import DefusedXmlException, DTDForbidden, EntitiesForbidden
 
@@ -47,25 +33,11 @@ from coral_lang.net import (
     TransitionKind,
     Value,
 )
+from coral_lang.pnml.common import CORAL_TOOL, CORAL_TOOL_VERSION, PTNET_TYPE
 from coral_lang.safefile import PNML_LIMIT, UnreadableFile, read_file_bytes
 from coral_lang.safexml import SafeExpatParser
 
-__all__ = [
-    "CORAL_TOOL",
-    "CORAL_TOOL_VERSION",
-    "PNML_NAMESPACE",
-    "PTNET_TYPE",
-    "parse_pnml",
-    "read_pnml",
-    "to_pnml",
-    "write_pnml",
-]
-
-
-PNML_NAMESPACE = "http://www.pnml.org/version-2009/grammar/pnml"
-PTNET_TYPE = "http://www.pnml.org/version-2009/grammar/ptnet"
-CORAL_TOOL = "coral"
-CORAL_TOOL_VERSION = "1"
+__all__ = ["parse_pnml", "read_pnml"]
 
 # Other net types people try to feed us, so the refusal can say what the file is.
 _KNOWN_TYPES = {
@@ -80,19 +52,7 @@ _HIGH_LEVEL = frozenset(
 _INTEGER = re.compile(r"[+-]?[0-9]{1,19}", re.ASCII)
 """At most 19 digits: every count and weight fits in 64 bits (a 5,000-digit one would
 make ``int()`` raise, far past the analyses' own 2**63 limit)."""
-# Ids written verbatim: a conservative, ASCII-only subset of XML's NCName that every PNML
-# tool accepts. Other names get a sanitised id; their real name rides in a coral block.
-_SAFE_ID = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*", re.ASCII)
-_UNSAFE_ID_CHAR = re.compile(r"[^A-Za-z0-9_.\-]", re.ASCII)
-# Characters XML 1.0 cannot carry at all, not even as character references.
-_NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
-
-
 _Kind = TypeVar("_Kind", PlaceKind, TransitionKind, AssertKind)
-
-# ---------------------------------------------------------------------------------------
-# Reading
-# ---------------------------------------------------------------------------------------
 
 
 @dataclass(slots=True)
@@ -372,6 +332,7 @@ class _Reader:
                 assertions=extras.assertions,
                 vehicle=extras.vehicle,
                 sources=extras.sources,
+                requirements=extras.requirements,
             )
         except NetError as e:
             raise self.error(net, f"inconsistent net '{net_ident}': {e}") from None
@@ -693,8 +654,11 @@ class _Reader:
         vehicle = block.child("vehicle")
         finals = []
         assertions = []
+        requirements: dict[str, None] = {}
         for child in block.children:
-            if child.tag == "final":
+            if child.tag == "require":
+                requirements[self.requirement(child)] = None
+            elif child.tag == "final":
                 finals.append(FinalMarking(self.tokens(child), self.span(child)))
             elif child.tag == "assertion":
                 kind = self.enum(child, "kind", AssertKind, AssertKind.NEVER)
@@ -717,7 +681,22 @@ class _Reader:
             sources=tuple(self.required(c, "path") for c in block.children if c.tag == "source"),
             finals=tuple(finals),
             assertions=tuple(assertions),
+            requirements=tuple(requirements),
         )
+
+    def requirement(self, element: _Element) -> str:
+        """A ``require`` line's name, refused unless the compiler knows it: a certificate
+        must prove each one, so a name nothing can prove is an error, not a no-op."""
+        from coral_lang.compiler import REQUIREMENTS  # only for the rare net that has one
+
+        name = self.required(element, "name")
+        if name not in REQUIREMENTS:
+            raise self.error(
+                element,
+                f"coral <require> names unknown requirement '{_short(name)}'"
+                f"{did_you_mean(name, REQUIREMENTS)}; known: {', '.join(REQUIREMENTS)}",
+            )
+        return name
 
 
 _NODE_TAGS = frozenset({"place", "transition", "referencePlace", "referenceTransition"})
@@ -739,6 +718,7 @@ class _NetExtras:
     sources: tuple[str, ...] = ()
     finals: tuple[FinalMarking, ...] = ()
     assertions: tuple[Assertion, ...] = ()
+    requirements: tuple[str, ...] = ()
 
 
 def _coral_block(element: _Element) -> _Element | None:
@@ -746,296 +726,6 @@ def _coral_block(element: _Element) -> _Element | None:
         if child.tag == "toolspecific" and _is_coral_block(child):
             return child
     return None
-
-
-# ---------------------------------------------------------------------------------------
-# Writing
-# ---------------------------------------------------------------------------------------
-
-
-def write_pnml(net: Net, path: str | os.PathLike[str]) -> None:
-    """Write ``net`` as a PNML file (UTF-8); see `to_pnml`.
-
-    Raises:
-        PnmlError: A name or label holds a character XML cannot carry.
-        OSError: The file cannot be written.
-    """
-    text = to_pnml(net)
-    with open(path, "w", encoding="utf-8", newline="\n") as f:
-        f.write(text)
-
-
-def to_pnml(net: Net) -> str:
-    """The net as a standard single-page ptnet PNML document.
-
-    Names that are plain ASCII identifiers (dots and dashes allowed) are used as ids
-    unchanged; any other name, or one clashing with another element's id, gets a
-    sanitised unique id, and the real name is kept in a coral ``<toolspecific>`` block
-    so `parse_pnml` restores it. Weights of 1 and markings of 0 are left implicit, as
-    the standard allows.
-
-    Args:
-        net: Any net.
-
-    Returns:
-        The document, starting with an XML declaration.
-
-    Raises:
-        PnmlError: A name or label holds a character XML cannot carry (e.g. ``\\x00``).
-    """
-    ids = _IdAllocator()
-    place_ids = ids.assign([p.name for p in net.places])
-    transition_ids = ids.assign([t.name for t in net.transitions])
-    net_id = ids.fresh(net.name)
-    page_id = ids.fresh("page0")
-
-    out = [
-        '<?xml version="1.0" encoding="UTF-8"?>',
-        f"<pnml xmlns={quoteattr(PNML_NAMESPACE)}>",
-        f"  <net id={_attr(net_id)} type={quoteattr(PTNET_TYPE)}>",
-        f"    <name><text>{_text(net.name)}</text></name>",
-        f"    <page id={_attr(page_id)}>",
-    ]
-    for place, ident in zip(net.places, place_ids, strict=True):
-        body = _name_text(place.label)
-        if place.initial:
-            body.append(f"<initialMarking><text>{place.initial}</text></initialMarking>")
-        out += _node("place", ident, body + _place_block(place, ident))
-    for tr, ident in zip(net.transitions, transition_ids, strict=True):
-        out += _node("transition", ident, _name_text(tr.label) + _transition_block(tr, ident))
-    place_id = dict(zip((p.name for p in net.places), place_ids, strict=True))
-    for tr, ident in zip(net.transitions, transition_ids, strict=True):
-        arcs = [(place_id[p], ident, w) for p, w in tr.inputs]
-        arcs += [(ident, place_id[p], w) for p, w in tr.outputs]
-        for source, target, weight in arcs:
-            arc_id = ids.fresh(f"{source}-{target}")
-            head = f"      <arc id={_attr(arc_id)} source={_attr(source)} target={_attr(target)}"
-            if weight == 1:
-                out.append(head + "/>")
-            else:
-                out.append(head + ">")
-                out.append(f"        <inscription><text>{weight}</text></inscription>")
-                out.append("      </arc>")
-    out.append("    </page>")
-    out.extend(_indent(_net_block(net, net_id), 4))
-    out.append("  </net>")
-    out.append("</pnml>")
-    return "\n".join(out) + "\n"
-
-
-class _IdAllocator:
-    """Hands out document-unique XML ids, keeping names as ids whenever it can."""
-
-    def __init__(self) -> None:
-        self.used: set[str] = set()
-
-    def assign(self, names: list[str]) -> list[str]:
-        # First pass: safe names claim themselves, so a sanitised id never steals one.
-        result: list[str | None] = []
-        for name in names:
-            if _SAFE_ID.fullmatch(name) and name not in self.used:
-                self.used.add(name)
-                result.append(name)
-            else:
-                result.append(None)
-        return [
-            ident if ident is not None else self.fresh(name)
-            for ident, name in zip(result, names, strict=True)
-        ]
-
-    def fresh(self, wanted: str) -> str:
-        base = _UNSAFE_ID_CHAR.sub("_", wanted)
-        if not base or not _SAFE_ID.fullmatch(base):
-            base = "_" + base
-        candidate, n = base, 1
-        while candidate in self.used:
-            n += 1
-            candidate = f"{base}_{n}"
-        self.used.add(candidate)
-        return candidate
-
-
-def _check_xml(value: str) -> str:
-    bad = _NOT_XML.search(value)
-    if bad is not None:
-        raise PnmlError(
-            f"cannot write {value!r} to PNML: character {bad.group()!r} is not allowed in XML"
-        )
-    return value
-
-
-def _attr(value: str | int | float) -> str:
-    return quoteattr(_check_xml(str(value)))
-
-
-def _text(value: str) -> str:
-    # A raw carriage return would come back as a line feed; a reference keeps it.
-    return escape(_check_xml(value)).replace("\r", "&#13;")
-
-
-def _name_text(label: str) -> list[str]:
-    return [f"<name><text>{_text(label)}</text></name>"] if label else []
-
-
-def _node(tag: str, ident: str, body: list[str]) -> list[str]:
-    head = f"      <{tag} id={_attr(ident)}"
-    if not body:
-        return [head + "/>"]
-    return [head + ">", *_indent(body, 8), f"      </{tag}>"]
-
-
-def _indent(lines: list[str], width: int) -> list[str]:
-    pad = " " * width
-    return [pad + line for line in lines]
-
-
-def _element(tag: str, attrs: dict[str, str | int | float | None]) -> str:
-    rendered = "".join(f" {k}={_attr(v)}" for k, v in attrs.items() if v is not None)
-    return f"<{tag}{rendered}/>"
-
-
-def _block(lines: list[str]) -> list[str]:
-    if not lines:
-        return []
-    head = f"<toolspecific tool={quoteattr(CORAL_TOOL)} version={quoteattr(CORAL_TOOL_VERSION)}>"
-    return [head, *("  " + line for line in lines), "</toolspecific>"]
-
-
-def _name_line(name: str, ident: str) -> list[str]:
-    return [] if name == ident else [_element("name", {"value": name})]
-
-
-def _span_line(span: Span | None) -> list[str]:
-    if span is None:
-        return []
-    return [
-        _element(
-            "span",
-            {
-                "file": span.file,
-                "line": span.line,
-                "col": span.col,
-                "end-line": span.end_line,
-                "end-col": span.end_col,
-            },
-        )
-    ]
-
-
-def _resource_lines(resources: tuple[str, ...]) -> list[str]:
-    return [_element("resource", {"name": r}) for r in resources]
-
-
-def _place_block(place: Place, ident: str) -> list[str]:
-    lines = _name_line(place.name, ident)
-    mission = (
-        place.kind is not PlaceKind.MISSION
-        or place.capacity is not None
-        or place.span is not None
-        or place.resources
-        or place.pending_of is not None
-        or place.complement_of is not None
-        or place.armed_of is not None
-    )
-    if mission:
-        lines.append(
-            _element(
-                "place",
-                {
-                    "kind": place.kind.value,
-                    "capacity": place.capacity,
-                    "pending-of": place.pending_of,
-                    "complement-of": place.complement_of,
-                    "armed-of": place.armed_of,
-                },
-            )
-        )
-        lines += _span_line(place.span) + _resource_lines(place.resources)
-    return _block(lines)
-
-
-def _transition_block(tr: Transition, ident: str) -> list[str]:
-    lines = _name_line(tr.name, ident)
-    mission = (
-        tr.kind is not TransitionKind.PLAIN
-        or tr.priority
-        or tr.span is not None
-        or tr.command is not None
-        or tr.pending is not None
-        or tr.reply_to is not None
-        or tr.reply is not None
-        or tr.operator_input is not None
-    )
-    if mission:
-        lines.append(
-            _element(
-                "transition",
-                {
-                    "kind": tr.kind.value,
-                    "priority": tr.priority or None,
-                    "pending": tr.pending,
-                    "reply-to": tr.reply_to,
-                    "reply": tr.reply,
-                    "operator-input": tr.operator_input,
-                },
-            )
-        )
-        lines += _span_line(tr.span)
-        if tr.command is not None:
-            lines += _command_lines(tr.command)
-    return _block(lines)
-
-
-def _command_lines(command: Command) -> list[str]:
-    body = [
-        _element("param", {"name": name, "type": _value_type(value), "value": _value(value)})
-        for name, value in command.params
-    ]
-    body += _resource_lines(command.resources)
-    body += [_element("reply", {"kind": kind}) for kind in command.replies]
-    head = f"<command system={_attr(command.system)} name={_attr(command.name)}"
-    if not body:
-        return [head + "/>"]
-    return [head + ">", *("  " + line for line in body), "</command>"]
-
-
-def _value_type(value: Value) -> str:
-    if isinstance(value, bool):
-        return "bool"
-    if isinstance(value, int):
-        return "int"
-    if isinstance(value, float):
-        return "float"
-    return "str"
-
-
-def _value(value: Value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return repr(value)  # repr round-trips every float exactly
-    return str(value)
-
-
-def _token_lines(tokens: tuple[tuple[str, int], ...]) -> list[str]:
-    return [_element("tokens", {"place": p, "count": n}) for p, n in tokens]
-
-
-def _net_block(net: Net, ident: str) -> list[str]:
-    lines = _name_line(net.name, ident)
-    if net.vehicle is not None:
-        lines.append(_element("vehicle", {"name": net.vehicle}))
-    lines += [_element("source", {"path": s}) for s in net.sources]
-    for final in net.finals:
-        body = _span_line(final.span) + _token_lines(final.tokens)
-        lines += ["<final>", *("  " + line for line in body), "</final>"]
-    for assertion in net.assertions:
-        if assertion.temporal:
-            continue  # PNML has no formula syntax: temporal assertions are not exported
-        head = _element("assertion", {"kind": assertion.kind.value, "bound": assertion.bound})
-        body = _span_line(assertion.span) + _token_lines(assertion.places)
-        lines += [head[:-2] + ">", *("  " + line for line in body), "</assertion>"]
-    return _block(lines)
 
 
 def _short(raw: str) -> str:

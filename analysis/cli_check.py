@@ -1,0 +1,299 @@
+"""``coral-check [check] FILE...``, ``coral-check lint FILE...``, ``coral-check verify FILE``.
+
+All three check each file through the one pipeline, `analysis.pipeline.check_file`, and
+differ only in what they show: ``check`` and ``lint`` render a run of outcomes (text,
+JSON, SARIF, HTML); ``verify`` shows one file's report with the diagnostics on stderr,
+and can write its certificate. Their JSON is the one document of
+`analysis.outcome.to_json_document`, whose ``command`` says which ran.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from analysis.cli_options import PROG, Settings, output_conflict, resolve
+from analysis.outcome import EXIT_ERRORS, EXIT_USAGE, FileOutcome, worst_exit_code
+from coral_lang.cliframe import print_error, tool_version
+
+if TYPE_CHECKING:
+    import datetime as dt
+
+    from analysis.signing import SigningKey
+    from analysis.verify import VerifyOptions
+
+__all__ = ["SIGNING_KEY_ENV", "STDIN", "read_stdin_once", "run_check", "run_verify"]
+
+STDIN = "-"
+"""The file name that means standard input (shown as ``<stdin>``)."""
+
+SIGNING_KEY_ENV = "CORAL_SIGNING_KEY"
+"""Mirrors `analysis.signing.SIGNING_KEY_ENV`, which is only imported when signing (the
+cryptography package takes time to load, and most runs never sign)."""
+
+
+def read_stdin_once(files: Sequence[str]) -> str | None:
+    """The text of standard input when ``-`` is among ``files`` (None otherwise).
+
+    Raises:
+        ValueError: ``-`` was given more than once (standard input is read once).
+    """
+    if files.count(STDIN) > 1:
+        raise ValueError("'-' (standard input) can be given only once")
+    return sys.stdin.read() if STDIN in files else None
+
+
+def _write(text: str, output: str | Path | None) -> bool:
+    if not output:
+        sys.stdout.write(text)
+        return True
+    try:
+        Path(output).write_text(text, encoding="utf-8")
+    except OSError as exc:
+        print_error(PROG, f"cannot write '{output}': {exc.strerror}")
+        return False
+    return True
+
+
+def _check_one(
+    file: str, settings: Settings, verify: VerifyOptions | None, stdin: str | None
+) -> FileOutcome:
+    from analysis.pipeline import check_file
+
+    options = settings.check_options(verify=verify, text=stdin if file == STDIN else None)
+    outcome = check_file(file, options)
+    if outcome.input_error is not None:
+        print_error(PROG, f"cannot read '{outcome.path}': {outcome.input_error}")
+    return outcome
+
+
+# -- check and lint ---------------------------------------------------------------------
+
+
+def run_check(args: argparse.Namespace, *, lint_only: bool) -> int:
+    """``coral-check check`` (lint and verify) or ``coral-check lint``; the exit code."""
+    from analysis.terminal import render_footer, render_outcome, use_color
+
+    conflict = output_conflict([("-o", args.output)], args.files)
+    if conflict is not None:
+        print_error(PROG, conflict)
+        return EXIT_USAGE
+    try:
+        stdin = read_stdin_once(args.files)
+    except ValueError as exc:
+        print_error(PROG, str(exc))
+        return EXIT_USAGE
+    settings = resolve(args)
+    if settings is None:
+        return EXIT_USAGE
+    # The structural facts (invariants, siphons...) appear in JSON and HTML only.
+    verify = (
+        None
+        if lint_only
+        else settings.verify_options(args, structural=args.format in ("json", "html"))
+    )
+    streaming = args.format == "text" and not args.output
+    color = use_color(args.color, sys.stdout, os.environ) if streaming else args.color == "always"
+    outcomes: list[FileOutcome] = []
+    printed = False
+    for file in args.files:
+        outcome = _check_one(file, settings, verify, stdin)
+        outcomes.append(outcome)
+        if streaming:  # a terminal sees each file as soon as it is done
+            block = render_outcome(outcome, lint_only=lint_only, color=color, quiet=args.quiet)
+            if block:
+                sys.stdout.write(("\n" if printed else "") + block + "\n")
+                sys.stdout.flush()
+                printed = True
+    if streaming:
+        footer = render_footer(outcomes, args.quiet)
+        if footer:
+            sys.stdout.write(("\n" if printed else "") + footer + "\n")
+    elif not _write(_render(outcomes, args, lint_only, color), args.output):
+        return EXIT_USAGE
+    return worst_exit_code(o.exit_code() for o in outcomes)
+
+
+def _render(
+    outcomes: list[FileOutcome], args: argparse.Namespace, lint_only: bool, color: bool
+) -> str:
+    if args.format == "text":
+        from analysis.terminal import render_run
+
+        return render_run(outcomes, lint_only=lint_only, color=color, quiet=args.quiet)
+    if args.format == "json":
+        return _json(outcomes, "lint" if lint_only else "check")
+    if args.format == "sarif":
+        from analysis.sarif import to_sarif
+
+        return json.dumps(to_sarif(outcomes, tool_version=tool_version()), indent=2) + "\n"
+    from analysis.html_report import render_html
+
+    return render_html(outcomes, layout=args.net_layout, tool_version=tool_version())
+
+
+def _json(outcomes: list[FileOutcome], command: str) -> str:
+    from analysis.outcome import to_json_document
+
+    return json.dumps(to_json_document(outcomes, command, tool_version()), indent=2) + "\n"
+
+
+# -- verify -----------------------------------------------------------------------------
+
+
+def run_verify(args: argparse.Namespace) -> int:
+    """``coral-check verify FILE``: diagnostics to stderr, the report to stdout or
+    ``-o``, the certificate to ``--certificate``; the exit code."""
+    from coral_lang.diagnostics import render_all
+
+    conflict = output_conflict(
+        [("-o", args.output), ("--certificate", args.certificate)], [args.file]
+    )
+    if conflict is not None:
+        print_error(PROG, conflict)
+        return EXIT_USAGE
+    signing = _certificate_settings(args)
+    if signing is None:
+        return EXIT_USAGE
+    key, expires = signing
+    settings = resolve(args)
+    if settings is None:
+        return EXIT_USAGE
+    stdin = read_stdin_once([args.file])
+    verify = settings.verify_options(args, structural=True)
+    outcome = _check_one(args.file, settings, verify, stdin)
+    if outcome.input_error is not None:
+        return EXIT_USAGE
+    shown = outcome.path
+    if outcome.diagnostics:
+        print(render_all(outcome.diagnostics, outcome.sources), file=sys.stderr)
+    if outcome.net is None or outcome.errors:
+        print(f"{shown}: not verified: fix the errors above first", file=sys.stderr)
+        return EXIT_ERRORS
+    report = outcome.report
+    if report is None:  # a part of a mission: its mission is what gets verified
+        import shlex
+
+        mission = outcome.part_of
+        if args.certificate and mission is not None:
+            print_error(
+                PROG,
+                f"{shown} is a part of {mission}: certificates are for whole missions: "
+                f"{PROG} verify {shlex.quote(mission)} --certificate "
+                f"{shlex.quote(str(args.certificate))}",
+            )
+            return EXIT_USAGE
+        hint = f": coral-check verify {shlex.quote(mission)}" if mission else ""
+        print(
+            f"{shown}: a part of {mission or 'a mission'}, not verified on its own; "
+            f"verify the mission{hint}",
+            file=sys.stderr,
+        )
+    if args.format == "json":
+        text = _json([outcome], "verify")
+    elif report is None:
+        text = ""
+    else:
+        from analysis.terminal import render_report, use_color
+
+        color = (
+            use_color(args.color, sys.stdout, os.environ)
+            if not args.output
+            else args.color == "always"
+        )
+        text = render_report(outcome, color) + "\n"
+    if (
+        args.certificate
+        and report is not None
+        and not _write_certificate(args, outcome, settings, verify, key, expires)
+    ):
+        return EXIT_USAGE
+    if not _write(text, args.output):
+        return EXIT_USAGE
+    return outcome.exit_code()
+
+
+def _write_certificate(
+    args: argparse.Namespace,
+    outcome: FileOutcome,
+    settings: Settings,
+    verify: VerifyOptions,
+    key: SigningKey | None,
+    expires: dt.datetime | None,
+) -> bool:
+    from analysis.certificate import make_certificate, write_certificate
+    from coral_lang.mission import Mission
+
+    assert outcome.result is not None and outcome.report is not None
+    # The certificate records the profile the mission compiled against: the runtime
+    # refuses it once that profile changes in anything the mission depends on.
+    path = None if args.file == STDIN else Path(args.file)
+    mission = Mission.from_result(outcome.result, path, settings.profiles)
+    certificate = make_certificate(
+        outcome.report,
+        verify,
+        profile_content=mission.profile_content(),
+        expires=expires,
+    )
+    if key is not None:
+        from analysis.signing import sign_certificate
+
+        certificate = sign_certificate(certificate, key)
+    try:
+        write_certificate(certificate, args.certificate)
+    except OSError as exc:
+        print_error(PROG, f"cannot write '{args.certificate}': {exc.strerror}")
+        return False
+    if key is not None:
+        note = f"signed by key {key.public.key_id}"
+    else:
+        note = (
+            "UNSIGNED: no run accepts it; sign with --signing-key KEY "
+            f"(or ${SIGNING_KEY_ENV}), made by 'coral-check keygen --out KEY'"
+        )
+    print(f"{PROG}: certificate written to {args.certificate} ({note})", file=sys.stderr)
+    return True
+
+
+def _certificate_settings(
+    args: argparse.Namespace,
+) -> tuple[SigningKey | None, dt.datetime | None] | None:
+    """The signing key and expiry for ``--certificate``, or None (after saying why)
+    when a key cannot be used or ``--expires`` is not a future date. Read before
+    verifying, so a bad key fails in a second, not after a long search."""
+    key: SigningKey | None = None
+    expires: dt.datetime | None = None
+    if not args.certificate:
+        for option in ("signing_key", "expires"):
+            if getattr(args, option) is not None:
+                print_error(
+                    PROG, f"--{option.replace('_', '-')} applies to --certificate FILE; add it"
+                )
+                return None
+        return key, expires
+    from analysis.signing import KeyFileError, load_signing_key, signing_key_from_env
+
+    try:
+        if args.signing_key is not None:
+            key = load_signing_key(args.signing_key)
+        else:
+            key = signing_key_from_env(os.environ)
+    except KeyFileError as exc:
+        print_error(PROG, str(exc))
+        return None
+    if args.expires is not None:
+        import datetime as dt
+
+        from analysis.certificate import parse_expires
+
+        try:
+            expires = parse_expires(args.expires, dt.datetime.now(dt.UTC))
+        except ValueError as exc:
+            print_error(PROG, f"--expires: {exc}")
+            return None
+    return key, expires

@@ -1,0 +1,583 @@
+"""The packed keys of the stored markings and an open-addressing hash table over them
+(`KeyStore`), with batch insertion vectorised over whole frontiers.
+
+Part of `analysis.encoding`; see its docstring for how the pieces fit."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from analysis.encoding.compact import BoolArray, IntArray, KeyArray
+
+# -- hashing -----------------------------------------------------------------------------
+
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+EMPTY = np.uint64(0)
+"""Marks a free slot: tags are never 0 (a one-word key plus one, its top bit being 0,
+or a 63-bit hash plus one), so a table is born free from zeroed memory."""
+
+MAX_LOAD = 0.5
+"""Largest fill of the table after a batch (linear probing stays ~1.5 probes)."""
+
+BATCH_LOAD = 0.75
+"""Largest fill while a batch is placed (batches are cut to stay below it)."""
+
+_S1, _S27, _S29, _S30, _S31, _S32 = (np.uint64(k) for k in (1, 27, 29, 30, 31, 32))
+
+FILL_CHUNK = 1 << 18
+"""Keys placed per step when a table is rebuilt (bounds its temporaries)."""
+
+PROBE_WINDOW_BELOW = 8192
+"""Probe batches up to this size look at `_WINDOW` consecutive slots per round."""
+
+_WINDOW = np.arange(8, dtype=np.int64)
+
+
+WIDE_KEYS = 8
+"""From this many words per key, hash and compare with whole-array operations: one
+numpy call per word costs more than the 2-D work once keys are wide (missions with
+thousands of places pack into dozens of words)."""
+
+_WORD_MULTIPLIERS = np.random.default_rng(0x5EED).integers(
+    1, np.iinfo(np.int64).max, size=4096, dtype=np.int64
+).astype(np.uint64) | np.uint64(1)
+
+
+def word_multipliers(words: int) -> KeyArray:
+    """Odd per-word multipliers (fixed seed) that fold a row of ``words`` words into one
+    hash word; the component search uses them to deduplicate its rows too."""
+    if words <= _WORD_MULTIPLIERS.size:
+        return _WORD_MULTIPLIERS[:words]
+    reps = -(-words // _WORD_MULTIPLIERS.size)
+    return np.tile(_WORD_MULTIPLIERS, reps)[:words] * np.uint64(0x9E37)
+
+
+def _mix(h: KeyArray) -> KeyArray:
+    """Finaliser of splitmix64, in place: every input bit affects every output bit."""
+    h ^= h >> _S30
+    h *= _MIX1
+    h ^= h >> _S27
+    h *= _MIX2
+    h ^= h >> _S31
+    return h
+
+
+def _hash(keys: KeyArray) -> KeyArray:
+    """A well-mixed 64-bit hash of each key row.
+
+    The hash only chooses slots (and, for keys of several words, the tag kept in the
+    table); keys are always compared in full, so its quality affects speed, never
+    exactness.
+    """
+    if keys.shape[1] == 1:
+        h = keys[:, 0] * _GOLDEN
+        h ^= h >> _S32
+        h *= _MIX1
+        return h
+    with np.errstate(over="ignore"):
+        if keys.shape[1] >= WIDE_KEYS:
+            mixed: KeyArray = (keys * word_multipliers(keys.shape[1])).sum(axis=1, dtype=np.uint64)
+            return _mix(mixed)
+        h = keys[:, 0] ^ (keys[:, 0] >> _S30)
+        for w in range(1, keys.shape[1]):
+            h = (h ^ (h >> _S29)) * _GOLDEN + keys[:, w]
+            h ^= h >> _S30
+        return _mix(h)
+
+
+def _rows_differ(a: KeyArray, b: KeyArray) -> BoolArray:
+    """Row-wise ``a != b`` over all words, one word at a time (no 2-D reduction)
+    unless the keys are wide."""
+    if a.shape[1] >= WIDE_KEYS:
+        wide: BoolArray = (a != b).any(axis=1)
+        return wide
+    out: BoolArray = a[:, 0] != b[:, 0]
+    for w in range(1, a.shape[1]):
+        out |= a[:, w] != b[:, w]
+    return out
+
+
+def first_occurrences(keys: KeyArray) -> tuple[IntArray, IntArray]:
+    """Distinct rows of ``keys`` by first occurrence.
+
+    Returns:
+        ``(first, leader)``: ascending positions of the first occurrence of each
+        distinct row, and for every row the position of its first occurrence.
+    """
+    m = keys.shape[0]
+    if m == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    if keys.shape[1] == 1:
+        order = np.argsort(keys[:, 0], kind="stable")
+        ordered = keys[order, 0]
+        starts = np.empty(m, dtype=bool)
+        starts[0] = True
+        np.not_equal(ordered[1:], ordered[:-1], out=starts[1:])
+    else:
+        # Sort by a 64-bit hash (cheaper than a lexicographic sort of W words); equal
+        # rows are adjacent. A hash collision between different rows (vanishingly
+        # rare) would make them adjacent too: then fall back to the exact sort.
+        order = np.argsort(_hash(keys), kind="stable")
+        ordered2 = keys[order]
+        differs = _rows_differ(ordered2[1:], ordered2[:-1])
+        hashes = _hash(ordered2)
+        if (differs & (hashes[1:] == hashes[:-1])).any():
+            order = np.lexsort(keys.T[::-1])  # stable: equal rows keep batch order
+            ordered2 = keys[order]
+            differs = _rows_differ(ordered2[1:], ordered2[:-1])
+        starts = np.empty(m, dtype=bool)
+        starts[0] = True
+        starts[1:] = differs
+    group_first = order[starts]
+    leader = np.empty(m, dtype=np.int64)
+    leader[order] = group_first[np.cumsum(starts) - 1]
+    return np.sort(group_first), leader
+
+
+@dataclass(frozen=True)
+class Added:
+    """What `KeyStore.add` did with a batch of candidate keys.
+
+    Attributes:
+        first: positions of the candidates stored as new states, ascending; the new
+            states are numbered ``start, start + 1, ...`` in this order, and each is
+            the first candidate with its key.
+        start: the state number given to ``first[0]``.
+        cut: whether the state limit turned new states away.
+        ids: when asked for, the state number of every candidate (``-1`` for one the
+            limit turned away).
+    """
+
+    first: IntArray
+    start: int
+    cut: bool
+    ids: IntArray | None = None
+
+    @property
+    def known(self) -> BoolArray:
+        """Per candidate, whether its key was stored before the batch (needs ``ids``)."""
+        assert self.ids is not None, "add(..., want_ids=True) gives ids"
+        return (self.ids >= 0) & (self.ids < self.start)
+
+
+class Growable:
+    """An array that grows along its first axis. Its capacity is reserved up front as
+    zeroed memory, which costs only address space until rows are written (the kernel
+    hands out pages as they are touched, and here touching a fresh page costs far more
+    than writing it), so growing within the reservation never copies or re-touches."""
+
+    def __init__(self, tail: tuple[int, ...], dtype: npt.DTypeLike, reserve: int) -> None:
+        self._data: npt.NDArray[Any] = _reserved((reserve, *tail), dtype)
+        self.size = 0
+
+    @property
+    def view(self) -> npt.NDArray[Any]:
+        """The rows written so far (a view)."""
+        return self._data[: self.size]
+
+    @property
+    def capacity(self) -> int:
+        """Rows that fit without copying."""
+        return int(self._data.shape[0])
+
+    def ensure(self, rows: int) -> None:
+        """Room for ``rows`` rows (copies only past the reservation, doubling)."""
+        if rows > self._data.shape[0]:
+            shape = (max(rows, 2 * self._data.shape[0]), *self._data.shape[1:])
+            grown = np.zeros(shape, dtype=self._data.dtype)
+            grown[: self.size] = self._data[: self.size]
+            self._data = grown
+
+    def append(self, rows: npt.NDArray[Any]) -> None:
+        """Add ``rows`` at the end."""
+        end = self.size + rows.shape[0]
+        self.ensure(end)
+        self._data[self.size : end] = rows
+        self.size = end
+
+
+RESERVE_LIMIT = 1 << 26
+"""Most states a store reserves address space for up front (beyond, it doubles)."""
+
+RESERVE_BYTES = 1 << 30
+"""Most bytes of address space one reserved array takes (wide keys reserve fewer
+rows), so a reservation never approaches what the kernel would refuse."""
+
+
+def _reserved(shape: tuple[int, ...], dtype: npt.DTypeLike) -> npt.NDArray[Any]:
+    """Zeroed memory for up to ``shape[0]`` rows, fewer past `RESERVE_BYTES` or when the
+    address space is refused (callers grow past it anyway)."""
+    row = max(1, int(np.prod(shape[1:], dtype=np.int64)) * np.dtype(dtype).itemsize)
+    rows = max(1, min(shape[0], RESERVE_BYTES // row))
+    try:
+        return np.zeros((rows, *shape[1:]), dtype=dtype)
+    except MemoryError:
+        return np.zeros((min(rows, 1 << 12), *shape[1:]), dtype=dtype)
+
+
+class KeyStore:
+    """Packed markings in discovery order plus an open-addressing set of them.
+
+    ``keys[i]`` is the packed marking of state ``i``. The table has one ``uint64`` *tag*
+    per slot (``EMPTY`` = free) and the state number stored there. For one-word keys the
+    tag is the key plus one; for wider keys it is a 63-bit hash plus one, and a tag
+    match is only trusted after the full keys compare equal, so hash collisions cost a
+    probe, never a wrong answer. Slots are probed linearly from a hash of the key;
+    inserts are vectorised over whole batches, equal keys in one batch resolved in the
+    table. The table lives in a prefix of a buffer reserved for ``reserve`` states and
+    doubles in place (see `Growable` for why).
+    """
+
+    def __init__(
+        self,
+        n_words: int,
+        capacity: int = 1 << 12,
+        wide_index: bool = False,
+        reserve: int | None = None,
+    ) -> None:
+        self.n_words = n_words
+        self._index_type = np.int64 if wide_index else np.int32
+        reserve = min(max(capacity, reserve or 0), RESERVE_LIMIT)
+        self._keys = Growable((n_words,), np.uint64, reserve)
+        self._log = max(4, (int(capacity / MAX_LOAD) - 1).bit_length())
+        room = 1 << (int(reserve / MAX_LOAD) - 1).bit_length()
+        self._tag_buffer = _reserved((room,), np.uint64)
+        self._index_buffer = _reserved((room,), self._index_type)
+        self._use_table(self._log)
+
+    @classmethod
+    def of(cls, keys: KeyArray, wide_index: bool = False, reserve: int = 0) -> KeyStore:
+        """A store holding ``keys`` (pairwise distinct) as states ``0 .. len-1``."""
+        store = cls(keys.shape[1], max(1 << 12, keys.shape[0]), wide_index, reserve)
+        store._insert_distinct(np.ascontiguousarray(keys))
+        return store
+
+    @property
+    def size(self) -> int:
+        """Number of stored states."""
+        return self._keys.size
+
+    @property
+    def keys(self) -> KeyArray:
+        """Keys of all stored states, shape ``(size, n_words)`` (a view)."""
+        keys: KeyArray = self._keys.view
+        return keys
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the stored keys and of the table in use."""
+        return int(self.keys.nbytes + self._tags.nbytes + self._index.nbytes)
+
+    def rekey(self, keys: KeyArray) -> None:
+        """Replace every stored key by ``keys`` (same states, same order, a new packing,
+        pairwise distinct) and rebuild the table in place: a widening re-packs the
+        store without allocating (and touching) a new table."""
+        keys = np.ascontiguousarray(keys)
+        if keys.shape[1] == self.n_words:
+            self._keys.view[:] = keys
+        else:
+            self.n_words = keys.shape[1]
+            self._keys = Growable((self.n_words,), np.uint64, self._keys.capacity)
+            self._keys.append(keys)
+        self._tags[:] = EMPTY
+        tags, slots = self._locate(keys)
+        self._fill(tags, slots, np.arange(keys.shape[0], dtype=np.int64))
+
+    # -- slots -----------------------------------------------------------------------
+
+    def _locate(self, keys: KeyArray) -> tuple[KeyArray, IntArray]:
+        """Tag and home slot of each key."""
+        h = _hash(keys)
+        slots = (h >> np.uint64(64 - self._log)).view(np.int64)
+        if self.n_words == 1:
+            tags = keys[:, 0] + np.uint64(1)
+        else:
+            tags = h >> _S1
+            tags += np.uint64(1)
+        return tags, slots
+
+    def _same_keys(self, cand: KeyArray, which: IntArray, slots: IntArray) -> BoolArray:
+        """Whether candidates ``which`` equal the key in ``slots`` (tags already match;
+        only wide keys get here). A negative index refers to a candidate of the batch
+        being placed."""
+        ref = self._index.take(slots).astype(np.int64)
+        other = np.empty((which.size, self.n_words), dtype=np.uint64)
+        old = ref >= 0
+        other[old] = self.keys.take(ref[old], axis=0)
+        other[~old] = cand.take(-1 - ref[~old], axis=0)
+        return ~_rows_differ(cand.take(which, axis=0), other)
+
+    def _resize(self, log: int) -> None:
+        """A table of ``2**log`` slots, holding every stored key. Reads the old table
+        in slot order (no pass over the keys themselves): the new home slots are then
+        almost sorted already, which `_fill` likes."""
+        occupied = np.flatnonzero(self._tags)
+        tags, ids = self._tags.take(occupied), self._index.take(occupied)
+        del occupied
+        if self.n_words == 1:
+            keys = tags - np.uint64(1)
+            slots = (_hash(keys[:, None]) >> np.uint64(64 - log)).view(np.int64)
+        else:  # the tag is the hash shifted right by one, plus one
+            slots = ((tags - np.uint64(1)) >> np.uint64(63 - log)).view(np.int64)
+        self._tags[:] = EMPTY  # pages already touched; the rest of a buffer is still zero
+        self._use_table(log)
+        self._fill(tags, slots, ids)
+
+    def _use_table(self, log: int) -> None:
+        """Make the table the first ``2**log`` slots of the buffers (new, larger
+        buffers if they are too small)."""
+        size = 1 << log
+        if size > min(self._tag_buffer.size, self._index_buffer.size):
+            self._tag_buffer = np.zeros(size, dtype=np.uint64)
+            self._index_buffer = np.zeros(size, dtype=self._index_type)
+        self._log = log
+        self._tags = self._tag_buffer[:size]
+        self._index = self._index_buffer[:size]
+
+    def _fill(self, tags: KeyArray, slots: IntArray, ids: npt.NDArray[np.integer]) -> None:
+        """Place distinct keys into an empty table at once: in home-slot order, linear
+        probing puts the ``i``-th key at ``max(slot_i, position_{i-1} + 1)``, a running
+        maximum, computed a chunk at a time (small temporaries); the few keys that run
+        past the end wrap around through `_place`."""
+        order = np.argsort(slots, kind="stable")
+        last, size, chunk = -1, self._tags.size, FILL_CHUNK
+        for start in range(0, order.size, chunk):
+            part = order[start : start + chunk]
+            steps = np.arange(part.size, dtype=np.int64)
+            position = slots.take(part) - steps
+            position[0] = max(int(position[0]), last + 1)
+            np.maximum.accumulate(position, out=position)
+            position += steps
+            last = int(position[-1])
+            inside = position < size
+            rest = part[~inside]
+            part, position = part[inside], position[inside]
+            self._tags[position] = tags.take(part)
+            self._index[position] = ids.take(part)
+            if rest.size:  # after the others: they wrap around to the first free slots
+                self._place(tags.take(rest), slots.take(rest), ids.take(rest).astype(np.int64))
+
+    def _reserve(self, need: int, load: float) -> None:
+        """Grow the table until ``need`` keys fill it at most ``load``."""
+        log = self._log
+        while need > load * (1 << log):
+            log += 1
+        if log != self._log:
+            self._resize(log)
+
+    def _place(self, tags: KeyArray, slots: IntArray, ids: IntArray) -> None:
+        """Write pairwise distinct keys (by tag and home slot) that are not in the table
+        yet, as states ``ids``."""
+        mask = (1 << self._log) - 1
+        table, index = self._tags, self._index
+        while slots.size:
+            free = np.flatnonzero(table.take(slots) == EMPTY)
+            fs, ft, fi = slots.take(free), tags.take(free), ids.take(free)
+            table[fs] = ft
+            ok = np.flatnonzero(table.take(fs) == ft)
+            index[fs.take(ok)] = fi.take(ok)
+            placed = np.zeros(slots.size, dtype=bool)
+            placed[free.take(ok)] = index.take(fs.take(ok)) == fi.take(ok)
+            more = np.flatnonzero(~placed)
+            slots = slots.take(more)
+            slots += 1
+            slots &= mask
+            tags, ids = tags.take(more), ids.take(more)
+
+    def _insert_distinct(self, keys: KeyArray) -> None:
+        """Store pairwise distinct new keys as the next states."""
+        need = self.size + keys.shape[0]
+        self._reserve(need, MAX_LOAD)
+        tags, slots = self._locate(keys)
+        ids = np.arange(self.size, need, dtype=np.int64)
+        if self.size:
+            self._place(tags, slots, ids)
+        else:
+            self._fill(tags, slots, ids)
+        self._keys.append(keys)
+
+    # -- queries and inserts ------------------------------------------------------------
+
+    def _probe(self, slots: IntArray, tags: KeyArray) -> tuple[BoolArray, BoolArray, IntArray]:
+        """One probing round from ``slots``: per candidate, whether it found its tag,
+        whether it found a free slot (never both), and that slot (the last one looked
+        at when neither). Small batches look at `_WINDOW` consecutive slots at once
+        (fewer rounds, fewer numpy calls); large ones at one (less work per candidate).
+        """
+        if slots.size > PROBE_WINDOW_BELOW:
+            content = self._tags.take(slots)
+            return content == tags, content == EMPTY, slots
+        mask = (1 << self._log) - 1
+        window = slots[:, None] + _WINDOW
+        window &= mask
+        contents = self._tags.take(window)
+        hits = contents == tags[:, None]
+        stops = contents == EMPTY
+        stops |= hits
+        first = stops.argmax(axis=1)
+        rows = np.arange(slots.size)
+        hit = hits[rows, first]
+        free = stops[rows, first] & ~hit
+        return hit, free, window[rows, first]
+
+    def _onward(self, at: IntArray, stopped: BoolArray, more: IntArray) -> IntArray:
+        """Where the candidates ``more`` probe next: after the slot they stopped at (a
+        claim lost, or a tag match that was another key), or after the window when they
+        found neither their tag nor a free slot (``at`` is then its first slot)."""
+        onward = at.take(more)
+        if stopped.size > PROBE_WINDOW_BELOW:
+            onward += 1
+        else:
+            onward += np.where(stopped.take(more), 1, _WINDOW.size)
+        onward &= (1 << self._log) - 1
+        return onward
+
+    def find(self, cand: KeyArray) -> IntArray:
+        """State number of each candidate key, ``-1`` if it is not stored."""
+        cand = np.ascontiguousarray(cand)
+        tags, slots = self._locate(cand)
+        out = np.full(cand.shape[0], -1, dtype=np.int64)
+        pos = np.arange(cand.shape[0], dtype=np.int64)
+        while pos.size:
+            hit, free, at = self._probe(slots, tags)
+            stopped = hit | free
+            where = np.flatnonzero(hit)
+            if self.n_words > 1 and where.size:
+                same = self._same_keys(cand, pos.take(where), at.take(where))
+                hit[where[~same]] = False
+                where = where[same]
+            out[pos.take(where)] = self._index.take(at.take(where))
+            more = np.flatnonzero(~(hit | free))
+            slots = self._onward(at, stopped, more)
+            pos, tags = pos.take(more), tags.take(more)
+        return out
+
+    def contains(self, cand: KeyArray) -> BoolArray:
+        """Which candidate keys are stored."""
+        found: BoolArray = self.find(cand) >= 0
+        return found
+
+    def add(self, cand: KeyArray, limit: int | None = None, want_ids: bool = False) -> Added:
+        """Store the candidate keys not seen before; the batch may repeat keys.
+
+        Args:
+            cand: candidate keys, shape ``(m, n_words)``.
+            limit: store at most this many new states (the budget left).
+            want_ids: also return every candidate's state number.
+
+        Returns:
+            An `Added` record; the new states are numbered ``size_before, ...`` in
+            the order of their first occurrence in ``cand``.
+        """
+        cand = np.ascontiguousarray(cand)
+        m, start = cand.shape[0], self.size
+        if limit is not None and m > limit:
+            return self._add_capped(cand, limit)
+        firsts: list[IntArray] = []
+        ids: list[IntArray] = []
+        done = 0
+        while done < m:
+            room = int(BATCH_LOAD * (1 << self._log)) - self.size
+            if room < min(m - done, 1 << (self._log - 3)):
+                self._resize(self._log + 1)
+                continue
+            first, piece_ids = self._claim(cand[done : done + room], want_ids)
+            firsts.append(first + done)
+            if piece_ids is not None:
+                ids.append(piece_ids)
+            done += min(room, m - done)
+            self._reserve(self.size, MAX_LOAD)
+        first = np.concatenate(firsts) if firsts else np.zeros(0, dtype=np.int64)
+        all_ids = np.concatenate(ids) if want_ids and ids else None
+        if want_ids and all_ids is None:
+            all_ids = np.zeros(0, dtype=np.int64)
+        return Added(first, start, False, all_ids)
+
+    def _claim(self, cand: KeyArray, want_ids: bool) -> tuple[IntArray, IntArray | None]:
+        """Insert a batch that fits in the table below `BATCH_LOAD`: the first
+        occurrence of every new key becomes a new state. Returns the positions of those
+        first occurrences (ascending) and, if asked, every candidate's state number."""
+        m = cand.shape[0]
+        tags, slots = self._locate(cand)
+        index = self._index
+        final = np.empty(m, dtype=np.int64) if want_ids else None
+        pos = np.arange(m, dtype=np.int64)
+        claimed: list[IntArray] = []
+        while True:
+            done, empty, at = self._probe(slots, tags)
+            stopped = done | empty
+            if self.n_words > 1 and done.any():
+                hit = np.flatnonzero(done)
+                done[hit] = self._same_keys(cand, pos.take(hit), at.take(hit))
+            free = np.flatnonzero(empty)
+            if free.size:
+                done[free] = self._claim_free(cand, pos.take(free), at.take(free), tags, free)
+                claimed.append(self._reps)
+            if final is not None:
+                settled = np.flatnonzero(done)
+                final[pos.take(settled)] = at.take(settled)
+            more = np.flatnonzero(~done)
+            if not more.size:
+                break
+            slots = self._onward(at, stopped, more)
+            pos, tags = pos.take(more), tags.take(more)
+        new_slots = np.concatenate(claimed) if claimed else np.zeros(0, dtype=np.int64)
+        reps = -1 - index.take(new_slots).astype(np.int64)
+        is_first = np.zeros(m, dtype=bool)
+        is_first[reps] = True
+        first = np.flatnonzero(is_first)
+        slot_of = np.empty(m, dtype=np.int64)
+        slot_of[reps] = new_slots
+        need = self.size + first.size
+        index[slot_of.take(first)] = np.arange(self.size, need, dtype=np.int64)
+        self._keys.append(cand.take(first, axis=0))
+        return first, (index.take(final).astype(np.int64) if final is not None else None)
+
+    def _claim_free(
+        self, cand: KeyArray, fp: IntArray, fs: IntArray, tags: KeyArray, free: IntArray
+    ) -> BoolArray:
+        """Candidates ``fp`` (batch positions) found free slots ``fs``: write their tags,
+        then among the candidates whose tag stayed, the first (smallest position) is
+        recorded in the slot as the new key's representative, the others with the same
+        key are its repeats. Returns which candidates are settled (representative or
+        repeat); sets ``self._reps`` to the slots that got a representative."""
+        ft = tags.take(free)
+        table, index = self._tags, self._index
+        # Several candidates may claim one slot: written in reverse, so the smallest
+        # position normally writes last and wins (checked below, never assumed).
+        table[fs[::-1]] = ft[::-1]
+        ok = np.flatnonzero(table.take(fs) == ft)
+        fs_ok, fp_ok = fs.take(ok), fp.take(ok)
+        refs = -1 - fp_ok
+        index[fs_ok[::-1]] = refs[::-1]
+        rep = -1 - index.take(fs_ok).astype(np.int64)
+        if (rep > fp_ok).any():  # numpy assigned repeats in another order
+            np.maximum.at(index, fs_ok, refs.astype(self._index_type))
+            rep = -1 - index.take(fs_ok).astype(np.int64)
+        settled = np.zeros(fs.size, dtype=bool)
+        if self.n_words == 1:
+            settled[ok] = True
+        else:  # equal tags, different keys: only repeats of the representative settle
+            settled[ok] = ~_rows_differ(cand.take(fp_ok, axis=0), cand.take(rep, axis=0))
+        self._reps = fs_ok.compress(rep == fp_ok)
+        return settled
+
+    def _add_capped(self, cand: KeyArray, limit: int) -> Added:
+        """`add` when the budget may turn new keys away: look up first, keep the first
+        ``limit`` new keys by first occurrence, place only those."""
+        start = self.size
+        ids = self.find(cand)
+        unknown = np.flatnonzero(ids < 0)
+        first_u, leader_u = first_occurrences(cand.take(unknown, axis=0))
+        cut = first_u.size > limit
+        kept = first_u[:limit]
+        self._insert_distinct(cand.take(unknown.take(kept), axis=0))
+        rank = np.searchsorted(first_u, leader_u)
+        ids[unknown] = np.where(rank < limit, start + rank, -1)
+        return Added(unknown.take(kept), start, cut, ids)

@@ -1,0 +1,266 @@
+"""Many fuzz runs: run ``i`` of ``--seed S`` has run seed ``S + i``, and what they add up to.
+
+`fuzz` runs a campaign (Ctrl-C stops it early, keeping the runs so far); `FuzzReport`
+holds the runs and the figures drawn from them: the share that reached a declared final
+marking, the virtual mission times, which of the net's transitions the runs fired
+(`Coverage`, with the branches never rehearsed as `NeverFired`), and, for deadlocked
+runs, whether analysis predicts their dead marking.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from analysis.certificate import CertificateCheck
+from coral_lang.net import Net, TransitionKind
+from runtime.controller import RunEnd
+from runtime.fuzz.one_run import FuzzOptions, FuzzRun, run_one, run_seed
+
+__all__ = [
+    "Coverage",
+    "FuzzReport",
+    "NeverFired",
+    "Progress",
+    "fuzz",
+    "predicted_deadlocks",
+]
+
+
+@dataclass(frozen=True)
+class NeverFired:
+    """A transition no run fired: a branch of the mission the campaign never rehearsed.
+
+    Attributes:
+        transition: its name (a reply transition is ``COMMAND_TRANSITION.KIND``).
+        line: ``file:line`` of the mission text that made it (None: no source, e.g. PNML).
+        command: the vehicle command it sends (command transitions) or answers (reply
+            transitions); None for a plain transition.
+        reply: the reply kind, for a reply transition; else None.
+    """
+
+    transition: str
+    line: str | None
+    command: str | None
+    reply: str | None
+
+    def describe(self) -> str:
+        """E.g. ``check_depth.timeout (pool.coral:30): DEPTH? replied timeout``."""
+        where = f" ({self.line})" if self.line else ""
+        if self.reply is not None:
+            return f"{self.transition}{where}: {self.command or '?'} replied {self.reply}"
+        if self.command is not None:
+            return f"{self.transition}{where}: sends {self.command}"
+        return f"{self.transition}{where}"
+
+    def to_json(self) -> dict[str, object]:
+        """JSON-ready form."""
+        return {
+            "transition": self.transition,
+            "line": self.line,
+            "command": self.command,
+            "reply": self.reply,
+        }
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """Which of the net's transitions the runs fired, summed over all runs.
+
+    Attributes:
+        transitions: how many transitions the net has.
+        fired: transition -> times fired over all runs (fired ones only, in net order).
+        never: the transitions no run fired, in net order.
+    """
+
+    transitions: int
+    fired: Mapping[str, int]
+    never: tuple[NeverFired, ...]
+
+    @property
+    def exercised(self) -> int:
+        """How many transitions fired at least once."""
+        return len(self.fired)
+
+    @property
+    def share(self) -> float:
+        """``exercised / transitions`` (1 for a net without transitions)."""
+        return self.exercised / self.transitions if self.transitions else 1.0
+
+    @classmethod
+    def of(cls, net: Net, runs: Iterable[FuzzRun]) -> Coverage:
+        """The coverage of ``runs`` of ``net``."""
+        totals: Counter[str] = Counter()
+        for run in runs:
+            totals.update(run.fired)
+        fired = {t.name: totals[t.name] for t in net.transitions if totals[t.name]}
+        never = tuple(_never_fired(net, t.name) for t in net.transitions if t.name not in fired)
+        return cls(transitions=len(net.transitions), fired=fired, never=never)
+
+    def to_json(self) -> dict[str, object]:
+        """JSON-ready form (``coverage`` in ``fuzz-report.json``)."""
+        return {
+            "transitions": self.transitions,
+            "exercised": self.exercised,
+            "fired": dict(self.fired),
+            "never": [n.to_json() for n in self.never],
+        }
+
+
+def _never_fired(net: Net, name: str) -> NeverFired:
+    transition = net.transition(name)
+    line = None if transition.span is None else f"{transition.span.file}:{transition.span.line}"
+    command = None if transition.command is None else transition.command.name
+    reply = None
+    if transition.kind is TransitionKind.REPLY:
+        reply = transition.reply
+        if transition.reply_to is not None:
+            sender = net.transition(transition.reply_to).command
+            command = None if sender is None else sender.name
+    return NeverFired(transition=name, line=line, command=command, reply=reply)
+
+
+@dataclass
+class FuzzReport:
+    """The runs of one fuzz and what they add up to."""
+
+    mission: str
+    mission_path: str
+    options: FuzzOptions
+    runs: list[FuzzRun]
+    wall_seconds: float
+    interrupted: bool = False
+    predicted_deadlocks: set[tuple[tuple[str, int], ...]] | None = None
+    """The dead markings analysis finds (None: not explored, or too large to explore)."""
+    net: Net | None = field(default=None, repr=False)
+    """The mission's net, for `coverage` (None: no coverage reported)."""
+
+    @property
+    def failures(self) -> list[FuzzRun]:
+        """The runs that did not reach a declared final marking."""
+        return [r for r in self.runs if not r.ok]
+
+    @property
+    def success_rate(self) -> float:
+        """Share of runs that reached a declared final marking (0 if none ran)."""
+        return (len(self.runs) - len(self.failures)) / len(self.runs) if self.runs else 0.0
+
+    @property
+    def schedules_per_second(self) -> float:
+        """Runs per second of wall time."""
+        return len(self.runs) / self.wall_seconds if self.wall_seconds > 0 else math.inf
+
+    def durations(self) -> dict[str, float]:
+        """Median, p90 and max of the virtual mission times (all runs)."""
+        times = sorted(r.duration for r in self.runs)
+        if not times:
+            return {}
+        return {
+            "median": statistics.median(times),
+            "p90": _percentile(times, 0.9),
+            "max": times[-1],
+        }
+
+    def predicted(self, run: FuzzRun) -> bool | None:
+        """Whether a deadlocked run's marking is one analysis predicts (None: unknown)."""
+        if self.predicted_deadlocks is None or run.end is not RunEnd.DEADLOCK:
+            return None
+        return tuple(sorted(run.marking.items())) in self.predicted_deadlocks
+
+    def coverage(self) -> Coverage | None:
+        """Which transitions the runs fired (None when the report has no `net`)."""
+        return None if self.net is None else Coverage.of(self.net, self.runs)
+
+    def longest(self, count: int = 5) -> list[FuzzRun]:
+        """The ``count`` longest runs, longest first."""
+        return sorted(self.runs, key=lambda r: (-r.duration, r.seed))[:count]
+
+    def to_json(self) -> dict[str, object]:
+        """The report as JSON-ready data."""
+        coverage = self.coverage()
+        return {
+            "mission": self.mission,
+            "mission_path": self.mission_path,
+            "link": self.options.link.name,
+            "seed": self.options.seed,
+            "runs_requested": self.options.runs,
+            "vehicle": self.options.profile.name if self.options.profile else None,
+            "simulator": self.options.simulator,
+            "faults": None if self.options.faults is None else str(self.options.faults),
+            "runs": [r.to_json() for r in self.runs],
+            "interrupted": self.interrupted,
+            "success_rate": self.success_rate,
+            "durations": self.durations(),
+            "wall_seconds": self.wall_seconds,
+            "schedules_per_second": self.schedules_per_second,
+            "coverage": None if coverage is None else coverage.to_json(),
+        }
+
+
+def _percentile(ordered: Sequence[float], q: float) -> float:
+    """The ``q`` quantile of sorted data (nearest rank: a time some run really took)."""
+    rank = max(1, math.ceil(q * len(ordered)))
+    return ordered[rank - 1]
+
+
+Progress = Callable[[int, int, int], None]
+"""``progress(done, total, failed)``, called after every run."""
+
+
+def fuzz(
+    net: Net,
+    approval: CertificateCheck,
+    options: FuzzOptions,
+    *,
+    mission_path: str = "",
+    failed_logs: Path | None = None,
+    progress: Progress | None = None,
+) -> FuzzReport:
+    """Run ``options.runs`` runs of ``net``; Ctrl-C stops early with the runs so far.
+
+    Args:
+        failed_logs: keep the controller log of each failed run in this folder.
+        progress: told after every run.
+    """
+    started = time.perf_counter()
+    runs: list[FuzzRun] = []
+    interrupted = False
+    try:
+        for index in range(options.runs):
+            seed = run_seed(options.seed, index)
+            runs.append(
+                run_one(net, approval, seed, options, index=index, keep_failed_logs=failed_logs)
+            )
+            if progress is not None:
+                progress(index + 1, options.runs, sum(not r.ok for r in runs))
+    except KeyboardInterrupt:
+        interrupted = True
+    report = FuzzReport(
+        mission=net.name,
+        mission_path=mission_path,
+        options=options,
+        runs=runs,
+        wall_seconds=time.perf_counter() - started,
+        interrupted=interrupted,
+        net=net,
+    )
+    if any(r.end is RunEnd.DEADLOCK for r in runs):
+        report.predicted_deadlocks = predicted_deadlocks(net)
+    return report
+
+
+def predicted_deadlocks(
+    net: Net, max_states: int = 1_000_000
+) -> set[tuple[tuple[str, int], ...]] | None:
+    """The dead markings of ``net``'s complete state space (None if it is too large)."""
+    from analysis.statespace import explore
+
+    space = explore(net, max_states=max_states)
+    if not space.complete:
+        return None
+    return {tuple(sorted(net.marking_dict(space.marking(int(d))).items())) for d in space.deadlocks}
