@@ -649,8 +649,10 @@ class EventLog:
             samples = [(chain.sample_n + i, *row) for i, row in enumerate(self._samples, 1)]
             state_sha = None if state_json is None else state_digest(state_json)
             after = self._next_chain(events, samples, state_sha)
+            began = False
             try:
                 db.execute("BEGIN IMMEDIATE")
+                began = True
                 if events:
                     db.executemany(
                         "INSERT INTO events (seq, time, kind, data) VALUES (?, ?, ?, ?)", events
@@ -682,14 +684,29 @@ class EventLog:
                         ),
                     )
                 db.execute("COMMIT")
+                self._committed(after)  # only now: a failed commit leaves the chain as it was
             except sqlite3.Error as error:
                 if db.in_transaction:
                     with contextlib.suppress(sqlite3.Error):
                         db.execute("ROLLBACK")
                 raise explain(self.path, "commit to the log", error) from None
-            self._chain = after  # only now: a failed commit leaves the chain where it was
-            self._events.clear()
-            self._samples.clear()
+            except BaseException:
+                # Ctrl-C (or SIGTERM taken as it) can land anywhere in here. Before COMMIT
+                # the transaction is still open: roll it back, the buffer stays for a
+                # retry. After it, the rows are on disk: the chain must say so, or the
+                # next commit would reuse their numbers.
+                if db.in_transaction:
+                    with contextlib.suppress(sqlite3.Error):
+                        db.execute("ROLLBACK")
+                elif began:
+                    self._committed(after)
+                raise
+
+    def _committed(self, after: ChainState) -> None:
+        """Bookkeeping once a commit is on disk (idempotent: it may run twice)."""
+        self._chain = after
+        self._events.clear()
+        self._samples.clear()
 
     def _next_chain(
         self,
