@@ -321,8 +321,9 @@ def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_fuzz_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """``coral-run fuzz``: its options and texts are `runtime.fuzz.cli`'s."""
-    from runtime.fuzz.cli import DESCRIPTION, EPILOG, add_fuzz_arguments
+    """``coral-run fuzz``: its options and texts are `runtime.fuzz.options`' (a module
+    that imports no part of a campaign, so listing the subcommand costs nothing)."""
+    from runtime.fuzz.options import DESCRIPTION, EPILOG, add_fuzz_arguments
 
     add_fuzz_arguments(
         commands.add_parser(

@@ -37,6 +37,7 @@ from analysis.certificate import CertificateCheck
 from coral_lang.diagnostics import CoralError
 from coral_lang.net import Command, Net, TransitionKind
 from coral_lang.profile import TIME_OUT
+from runtime.policy import Policy
 
 __all__ = [
     "CommandStatus",
@@ -70,19 +71,6 @@ class OperatorRefused(EngineError):
     """An operator action the engine does not take: an input the mission does not declare,
     one already given, a run that has ended, a pause while paused. The message says which
     and is what the operator sees; the engine is unchanged."""
-
-
-class Policy(enum.Enum):
-    """How the engine chooses among enabled transitions.
-
-    ``PRIORITY``: the highest ``priority`` first, then the earliest in source order (the
-    order of the net's transitions): deterministic, what runs on the vehicle.
-    ``RANDOM``: uniformly among the enabled transitions of the highest priority, from a
-    seeded generator: for tests that must see every order analysis allowed.
-    """
-
-    PRIORITY = "priority"
-    RANDOM = "random"
 
 
 class Outcome(enum.Enum):

@@ -28,47 +28,51 @@ The package, one module per job:
   `Coverage`);
 * `runtime.fuzz.report`: the text report, the histogram, a replay, the progress bar;
 * `runtime.fuzz.approval`: the certificate gate (`approval_for`, `UNVERIFIED`);
-* `runtime.fuzz.cli`: the command on the shared CLI frame (`add_fuzz_arguments`,
-  `run_fuzz`, `main`).
+* `runtime.fuzz.options`: the command's options (`add_fuzz_arguments`), importing no
+  part of a campaign, so ``coral-run`` lists ``fuzz`` without loading one;
+* `runtime.fuzz.cli`: the command on the shared CLI frame (`run_fuzz`, `main`).
 
 Every public name is re-exported here, so ``from runtime.fuzz import X`` is all a caller
-needs.
+needs; the modules are imported when a name is first used.
 
 Exit codes: 0 every run reached a declared final marking, 1 some run did not, 2 bad input.
 """
 
 from __future__ import annotations
 
-from runtime.fuzz.approval import UNVERIFIED, approval_for
-from runtime.fuzz.campaign import (
-    Coverage,
-    FuzzReport,
-    NeverFired,
-    Progress,
-    fuzz,
-    predicted_deadlocks,
-)
-from runtime.fuzz.cli import add_fuzz_arguments, build_parser, main, run_fuzz
-from runtime.fuzz.one_run import (
-    PSK,
-    SEED_LIMIT,
-    FuzzOptions,
-    FuzzRun,
-    events_digest,
-    make_vehicle,
-    run_one,
-    run_seed,
-)
-from runtime.fuzz.report import (
-    FAILURES_DIR,
-    HISTOGRAM,
-    NEVER_SHOWN,
-    REPORT_JSON,
-    ProgressBar,
-    format_replay,
-    format_report,
-    plot_histogram,
-)
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from runtime.fuzz.approval import UNVERIFIED, approval_for
+    from runtime.fuzz.campaign import (
+        Coverage,
+        FuzzReport,
+        NeverFired,
+        Progress,
+        fuzz,
+        predicted_deadlocks,
+    )
+    from runtime.fuzz.cli import add_fuzz_arguments, build_parser, main, run_fuzz
+    from runtime.fuzz.one_run import (
+        PSK,
+        SEED_LIMIT,
+        FuzzOptions,
+        FuzzRun,
+        events_digest,
+        make_vehicle,
+        run_one,
+        run_seed,
+    )
+    from runtime.fuzz.report import (
+        FAILURES_DIR,
+        HISTOGRAM,
+        NEVER_SHOWN,
+        REPORT_JSON,
+        ProgressBar,
+        format_replay,
+        format_report,
+        plot_histogram,
+    )
 
 __all__ = [
     "FAILURES_DIR",
@@ -100,3 +104,48 @@ __all__ = [
     "run_one",
     "run_seed",
 ]
+
+_HOMES = {
+    "Coverage": "runtime.fuzz.campaign",
+    "FAILURES_DIR": "runtime.fuzz.report",
+    "FuzzOptions": "runtime.fuzz.one_run",
+    "FuzzReport": "runtime.fuzz.campaign",
+    "FuzzRun": "runtime.fuzz.one_run",
+    "HISTOGRAM": "runtime.fuzz.report",
+    "NEVER_SHOWN": "runtime.fuzz.report",
+    "NeverFired": "runtime.fuzz.campaign",
+    "PSK": "runtime.fuzz.one_run",
+    "Progress": "runtime.fuzz.campaign",
+    "ProgressBar": "runtime.fuzz.report",
+    "REPORT_JSON": "runtime.fuzz.report",
+    "SEED_LIMIT": "runtime.fuzz.one_run",
+    "UNVERIFIED": "runtime.fuzz.approval",
+    "add_fuzz_arguments": "runtime.fuzz.cli",
+    "approval_for": "runtime.fuzz.approval",
+    "build_parser": "runtime.fuzz.cli",
+    "events_digest": "runtime.fuzz.one_run",
+    "format_replay": "runtime.fuzz.report",
+    "format_report": "runtime.fuzz.report",
+    "fuzz": "runtime.fuzz.campaign",
+    "main": "runtime.fuzz.cli",
+    "make_vehicle": "runtime.fuzz.one_run",
+    "plot_histogram": "runtime.fuzz.report",
+    "predicted_deadlocks": "runtime.fuzz.campaign",
+    "run_fuzz": "runtime.fuzz.cli",
+    "run_one": "runtime.fuzz.one_run",
+    "run_seed": "runtime.fuzz.one_run",
+}
+"""Where each public name lives. The package imports its modules when a name is first
+asked for (PEP 562), so ``coral-run`` can import `runtime.fuzz.options` for its parser
+without the engine, the certificate checks and numpy that a campaign needs."""
+
+
+def __getattr__(name: str) -> object:
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(home), name)
+    globals()[name] = value
+    return value

@@ -134,3 +134,20 @@ def test_parsing_any_arguments_never_raises(argv: Sequence[str]) -> None:
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         code = run_main(build_parser(), argv, lambda args: 0, default_command="run")
     assert code in (0, 2)
+
+
+def test_listing_the_subcommands_loads_no_campaign_nor_engine() -> None:
+    """``coral-run --help`` (and every subcommand's start) must not pay for fuzzing: the
+    fuzz parser comes from `runtime.fuzz.options`, which imports no part of a campaign."""
+    import subprocess
+    import sys
+
+    probe = (
+        "import sys, runtime.cli; runtime.cli.build_parser(); "
+        "print(sorted(m for m in ('runtime.engine', 'runtime.fuzz.one_run', "
+        "'analysis.certificate', 'numpy') if m in sys.modules))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True
+    ).stdout
+    assert out.strip() == "[]"
