@@ -649,6 +649,7 @@ class EventLog:
             samples = [(chain.sample_n + i, *row) for i, row in enumerate(self._samples, 1)]
             state_sha = None if state_json is None else state_digest(state_json)
             after = self._next_chain(events, samples, state_sha)
+            self._abandon_open_transaction(db)
             began = False
             try:
                 db.execute("BEGIN IMMEDIATE")
@@ -701,6 +702,16 @@ class EventLog:
                 elif began:
                     self._committed(after)
                 raise
+
+    def _abandon_open_transaction(self, db: sqlite3.Connection) -> None:
+        """Roll back a transaction an interrupted commit left open (a second Ctrl-C
+        during its own rollback): the log never holds one open between commits, and
+        what it wrote was never committed, so the chain is still right."""
+        if db.in_transaction:
+            try:
+                db.execute("ROLLBACK")
+            except sqlite3.Error as error:
+                raise explain(self.path, "roll back an interrupted commit", error) from None
 
     def _committed(self, after: ChainState) -> None:
         """Bookkeeping once a commit is on disk (idempotent: it may run twice)."""

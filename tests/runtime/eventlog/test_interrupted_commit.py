@@ -88,3 +88,36 @@ def test_an_interrupted_commit_leaves_a_log_that_goes_on_and_verifies(
     assert reopened.checkpoint() == {"n": 3}
     reopened.verify(KEY)
     reopened.close()
+
+
+class _FailingThenInterrupted(_Interrupting):
+    """An INSERT fails with a database error, then Ctrl-C lands in the ROLLBACK."""
+
+    def _around(self, sql: str, run: Callable[[], sqlite3.Cursor]) -> sqlite3.Cursor:
+        if sql.startswith("INSERT INTO events"):
+            raise sqlite3.OperationalError("disk I/O error")
+        if sql.startswith("ROLLBACK") and not self.fired:
+            self.fired = True
+            raise KeyboardInterrupt
+        return run()
+
+
+def test_ctrl_c_in_the_rollback_of_a_failed_commit_does_not_block_the_next(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "ctl.log"
+    log = EventLog.create(path, role="controller", mission="1", meta={}, mac_key=KEY)
+    log.event(1.0, "first")
+    real = log._db
+    assert real is not None
+    log._db = _FailingThenInterrupted(real, "", after=False)  # type: ignore[assignment]
+    with pytest.raises(KeyboardInterrupt):
+        log.commit({"n": 1})
+    log._db = real
+    assert real.in_transaction  # left open by the interrupted rollback
+    log.commit({"n": 1})
+    log.close()
+    reopened = EventLog.open(path, mac_key=KEY)
+    assert [event.kind for event in reopened.events()] == ["first"]
+    reopened.verify(KEY)
+    reopened.close()
