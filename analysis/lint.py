@@ -30,6 +30,7 @@ from coral_lang import ast
 from coral_lang.compiler import CompileResult
 from coral_lang.diagnostics import Diagnostic, Severity, Span
 from coral_lang.formula import places_of
+from coral_lang.lexer import Token, tokenize
 from coral_lang.net import Net, PlaceKind, TransitionKind
 from coral_lang.profile import VehicleProfile
 
@@ -403,40 +404,55 @@ def _apply_suppressions(
     (after code: its own line; alone: the next line) to keep a file's findings."""
     allowed: dict[tuple[str, int], set[str]] = {}
     problems: list[Diagnostic] = []
-    for file, text in sources.items():
-        for number, line in enumerate(text.splitlines(), start=1):
-            match = _ALLOW.search(line)
-            if match is None:
-                continue
-            col = match.start() + 1
-            span = Span(file, number, col, number, len(line) + 1)
-            codes = {c.strip() for c in match.group("codes").replace(",", " ").split()}
-            unknown = sorted(c for c in codes if c not in RULES)
-            if unknown:
-                problems.append(
-                    _finding(
-                        "CORAL208",
-                        f"unknown rule {', '.join(unknown)} in suppression",
-                        span,
-                        f"rules: {', '.join(RULES)}",
-                    )
+    for file, comment, match, alone in _allow_comments(sources):
+        number = comment.line
+        span = Span(file, number, comment.col + match.start(), number, comment.end_col)
+        codes = {c.strip() for c in match.group("codes").replace(",", " ").split()}
+        unknown = sorted(c for c in codes if c not in RULES)
+        if unknown:
+            problems.append(
+                _finding(
+                    "CORAL208",
+                    f"unknown rule {', '.join(unknown)} in suppression",
+                    span,
+                    f"rules: {', '.join(RULES)}",
                 )
-            if not match.group("reason"):
-                problems.append(
-                    _finding(
-                        "CORAL208",
-                        "suppression without a reason",
-                        span,
-                        "write '# coral: allow CODE -- why this is intended'",
-                    )
+            )
+        if not match.group("reason"):
+            problems.append(
+                _finding(
+                    "CORAL208",
+                    "suppression without a reason",
+                    span,
+                    "write '# coral: allow CODE -- why this is intended'",
                 )
-                continue
-            # after code: that line; alone on its line: the next one
-            target = number + 1 if not line[: match.start()].strip() else number
-            allowed.setdefault((file, target), set()).update(codes)
+            )
+            continue
+        # after code: that line; alone on its line: the next one
+        allowed.setdefault((file, number + 1 if alone else number), set()).update(codes)
     kept = [
         d
         for d in findings
         if d.span is None or d.code not in allowed.get((d.span.file, d.span.line), set())
     ]
     return kept, problems
+
+
+def _allow_comments(
+    sources: dict[str, str],
+) -> Iterator[tuple[str, Token, re.Match[str], bool]]:
+    """Every ``# coral: allow`` comment of ``sources``: its file, the comment, the match
+    and whether it is alone on its line. Read from the lexer's comment tokens, so lines
+    are counted as every finding counts them (on "\n" only, where ``str.splitlines``
+    also breaks at a form feed or U+2028) and a ``#`` inside a string is no comment."""
+    for file, text in sources.items():
+        if "coral:" not in text:
+            continue  # the common case: no suppression, no lexing
+        comments: list[Token] = []
+        tokenize(text, file, comments)
+        lines = text.split("\n")
+        for comment in comments:
+            match = _ALLOW.search(comment.text)
+            if match is not None:
+                alone = not lines[comment.line - 1][: comment.col - 1].strip()
+                yield file, comment, match, alone

@@ -33,7 +33,12 @@ Lint's findings must not change, and rather than trust the rules above to get ev
 case right, `format_source` checks: for every place a finding can point at (`_anchors`)
 it compares which suppression comments cover its line before and after, and lays the
 statements where they differ out as written (`_clusters`: statements sharing a source
-line go together), until they agree. Formatting twice gives what formatting once gave,
+line go together), until they agree. A comment reading ``# coral: part of ...`` is load
+bearing too (alone on its line before the first declaration it makes the file a part of
+a mission; alone anywhere else it is an error; after code it is a plain comment), so the
+same check holds what the compiler makes of each such comment (`_part_comments`): one
+the layout would move between trailing and own-line, or above the first declaration,
+keeps its statements as written. Formatting twice gives what formatting once gave,
 and the formatted text parses to the same tree (`tests/coral_lang/test_formatting.py`
 holds it to all of that, on every example and on generated missions).
 """
@@ -48,6 +53,7 @@ from dataclasses import dataclass, field
 from itertools import accumulate
 
 from coral_lang import ast
+from coral_lang.compiler import part_header
 from coral_lang.diagnostics import CompileError, Severity
 from coral_lang.gcpause import cyclic_gc_paused
 from coral_lang.lexer import Kind, Token, tokenize
@@ -77,20 +83,24 @@ def format_source(text: str, file: str) -> str:
         items = _items(mission, tokens)
         clusters = _clusters(items, tokens)
         wanted = _coverage(text, comments, _anchors(mission))
+        parts = _part_comments(text, file, comments)
         item_at = [(tokens[item.start].line, tokens[item.start].col) for item in items]
         kept: set[int] = set()  # clusters laid out as written
         while True:
             placed = _place_comments(comments, tokens, items, clusters, kept)
             out = _render(items, placed, text, clusters, kept)
             changed = _changed(out, file, wanted)
-            if not changed:
+            moved = _parts_changed(out, file, parts)
+            if not changed and not moved:
                 return out
-            owners = {
-                clusters[max(bisect.bisect_right(item_at, at) - 1, 0)] for at in changed
-            } - kept
+            owners = {clusters[max(bisect.bisect_right(item_at, at) - 1, 0)] for at in changed}
+            for at in moved if items else ():  # between two statements: keep both
+                after = bisect.bisect_right(item_at, at)
+                owners.update(clusters[k] for k in (max(after - 1, 0), min(after, len(items) - 1)))
+            owners -= kept
             if not owners:  # not expected (clusters as written read as the source
-                # does), but lint's findings are never risked: the text as written
-                return "".join(line.rstrip() + "\n" for line in text.splitlines())
+                # does), but what the file means is never risked: the text as written
+                return _as_written(text, file, parts)
             kept |= owners
 
 
@@ -116,14 +126,15 @@ class _Placed:
 
 def _anchors(mission: ast.Mission) -> list[tuple[int, int]]:
     """Where a lint finding can point, in source order: the mission's name, the start of
-    every statement, every place and input of a list."""
+    every statement, every place and input of a list (the first included: after
+    ``place`` alone on its line, the first name starts another line)."""
     found: list[tuple[int, int]] = []
     if mission.name is not None:
         found.append((mission.name_span.line, mission.name_span.col))
     for declaration in mission.declarations:
         found.append((declaration.span.line, declaration.span.col))
         if isinstance(declaration, ast.Places):
-            found.extend((p.span.line, p.span.col) for p in declaration.places[1:])
+            found.extend((p.span.line, p.span.col) for p in declaration.places)
         elif isinstance(declaration, ast.Inputs):
             found.extend((n.span.line, n.span.col) for n in declaration.names)
     return sorted(set(found))
@@ -159,6 +170,57 @@ def _changed(
     if len(got) != len(source):
         return source
     return [at for at, cover in zip(source, got, strict=True) if wanted[at] != cover]
+
+
+_PART_LIKE = re.compile(r"#[ \t]*coral:[ \t]*part\b")
+"""A comment the compiler may read as a part's header (`coral_lang.compiler.part_header`):
+only alone on its line, before the first declaration, and well formed is it one; written
+anywhere else it is an error (CORAL011), and after code it is a plain comment."""
+
+_LINE_NUMBER = re.compile(r"\bline \d+")
+
+
+def _part_comments(
+    text: str, file: str, comments: list[Token]
+) -> list[tuple[tuple[int, int], str]]:
+    """Per comment that reads like a part header, in order: where it is, and what the
+    compiler makes of it ("" nothing, "header", or its error without line numbers,
+    which formatting moves). Equal lists before and after formatting: the same part
+    header and the same errors about headers, so the same compile."""
+    like = [c for c in comments if _PART_LIKE.search(c.text) is not None]
+    if not like:
+        return []
+    header, errors = part_header(text, file)
+    said = {e.span.line: _LINE_NUMBER.sub("line", e.message) for e in errors if e.span}
+    if header is not None:
+        said[header.span.line] = "header"
+    return [((c.line, c.col), said.get(c.line, "")) for c in like]
+
+
+def _parts_changed(
+    out: str, file: str, parts: list[tuple[tuple[int, int], str]]
+) -> list[tuple[int, int]]:
+    """The source positions of the part-header-like comments ``out`` reads differently
+    from the source (a trailing one moved onto its own line, an own-line one made
+    trailing or moved above the first declaration)."""
+    if not parts:
+        return []
+    comments: list[Token] = []
+    tokenize(out, file, comments)
+    got = _part_comments(out, file, comments)
+    if len(got) != len(parts):
+        return [at for at, _ in parts]
+    return [at for (at, want), (_, have) in zip(parts, got, strict=True) if want != have]
+
+
+def _as_written(text: str, file: str, parts: list[tuple[tuple[int, int], str]]) -> str:
+    """``text`` with trailing white space dropped, or as it is if even that would change
+    how a part header reads (a header ending in a form feed is malformed)."""
+    lines = text.split("\n")  # the lexer's lines: not str.splitlines's (form feed...)
+    if lines[-1] == "":
+        lines.pop()
+    out = "".join(line.rstrip() + "\n" for line in lines)
+    return text if _parts_changed(out, file, parts) else out
 
 
 def _clusters(items: list[_Item], tokens: list[Token]) -> list[int]:

@@ -89,6 +89,35 @@ def test_bad_suppressions_are_reported() -> None:
     assert sorted(_codes(unknown)) == ["CORAL207", "CORAL208"]
 
 
+@pytest.mark.parametrize("odd", ["\f", "\v", "\x1c", "\x85", "\u2028", "\u2029"])
+def test_a_line_break_only_str_splitlines_sees_does_not_shift_suppressions(odd: str) -> None:
+    # the lexer (and so every finding) counts lines on "\n" only
+    text = (
+        RACE
+        + f"# about the race{odd} more words\n"
+        + ("# coral: allow CORAL207 -- either is fine\ntransition tb wait { s } signal { b }\n")
+    )
+    assert _codes(text) == []
+
+
+def test_an_allow_inside_a_string_is_no_suppression() -> None:
+    text = RACE + (
+        'const NOTE = "# coral: allow CORAL207 -- not a comment"  # coral: allow CORAL202 -- doc\n'
+        'transition tb wait { s } signal { b } const TEXT = "# coral: allow CORAL207 -- no"\n'
+    )
+    assert sorted(_codes(text)) == ["CORAL202", "CORAL207"]  # TEXT's; tb's race
+
+
+def test_a_suppression_after_another_comment_alone_on_its_line_covers_the_next() -> None:
+    text = RACE + (
+        "# note # coral: allow CORAL207 -- either is fine\ntransition tb wait { s } signal { b }\n"
+    )
+    assert _codes(text) == []
+    [finding] = lint(compile_source(RACE + "# note # coral: allow CORAL207\n", "m.coral"))
+    assert finding.code == "CORAL208" and finding.span is not None
+    assert (finding.span.line, finding.span.col) == (7, 8)
+
+
 def test_priority_settles_a_race_and_exclusive_joins_are_not_races() -> None:
     prioritised = RACE + "transition tb priority 1 wait { s } signal { b }\n"
     assert _codes(prioritised) == []

@@ -344,6 +344,16 @@ def test_statements_one_suppression_covers_together_are_kept_as_written() -> Non
             "  # coral: allow CORAL207 -- either\n",
             id="statements-sharing-a-line",
         ),
+        pytest.param(  # the second review's case A: the list's first place on the next line
+            HEADER + "place s = 1, a\nfinal { a }\ntransition t wait { s } signal { a }\n"
+            "place   # coral: allow CORAL203 -- reserved\nspare\n",
+            id="allow-after-a-bare-place-keyword",
+        ),
+        pytest.param(  # the same for an operator input
+            HEADER + "place s = 1, a\nfinal { a }\ntransition t wait { s } signal { a }\n"
+            "input   # coral: allow CORAL209 -- not wired yet\nstop\n",
+            id="allow-after-a-bare-input-keyword",
+        ),
         pytest.param(  # an allow alone on a line above a place joined to the list
             HEADER + "place s = 1, a, b,\n# coral: allow CORAL203 -- later\nc\n"
             "final { a }\ntransition t wait { s } signal { a }\n",
@@ -355,6 +365,98 @@ def test_formatting_never_changes_what_a_suppression_silences(text: str) -> None
     formatted = format_source(text, "m.coral")
     assert _findings(formatted) == _findings(text)
     assert format_source(formatted, "m.coral") == formatted
+
+
+def _compile_codes(text: str) -> list[str]:
+    return [d.code for d in compile_source(text, "m.coral").diagnostics]
+
+
+REVIEW_C = HEADER + (  # the second review's case C: a trailing comment that reads like a header
+    "place s = 1, a\nfinal { a }\ntransition t wait {\n"
+    " s  # coral: part of the retry fix (#12)\n } signal { a } # last\n"
+)
+REAL_HEADER = "# coral: part of whole.coral\n\nplace   a,b\n"
+PART_CASES = [
+    pytest.param(REVIEW_C, id="trailing-would-become-own-line"),
+    pytest.param(  # the reverse: a misplaced header after a trailing comment
+        HEADER + "place s = 1, a\nfinal { a }\ntransition t wait {\n"
+        " s  # first\n# coral: part of whole.coral\n } signal { a }\n",
+        id="own-line-would-become-trailing",
+    ),
+    pytest.param(  # a misplaced header the list's comma would lift above the first declaration
+        "place a\n# coral: part of whole.coral\n, b\n",
+        id="own-line-would-move-above-the-first-declaration",
+    ),
+    pytest.param(  # a form feed before it: no header as written, one if re-indented
+        "\f# coral: part of whole.coral\nplace a, b\n",
+        id="form-feed-indented",
+    ),
+    pytest.param(REAL_HEADER, id="a-real-header"),
+]
+
+
+@pytest.mark.parametrize("text", PART_CASES)
+def test_formatting_never_changes_what_a_part_header_comment_means(text: str) -> None:
+    formatted = format_source(text, "m.coral")
+    assert _compile_codes(formatted) == _compile_codes(text)
+    assert _comments(formatted) == _comments(text)
+    assert format_source(formatted, "m.coral") == formatted
+
+
+def test_only_the_statements_around_a_header_like_comment_keep_their_layout() -> None:
+    formatted = format_source(REVIEW_C.replace("place s = 1, a", "place   s=1,a"), "m.coral")
+    assert formatted.splitlines()[2] == "place s = 1, a"
+    assert formatted.splitlines()[-3:] == REVIEW_C.splitlines()[-3:]
+    # a real header stays where it is; the rest is laid out as usual
+    assert format_source(REAL_HEADER, "m.coral") == "# coral: part of whole.coral\n\nplace a, b\n"
+
+
+_PART_COMMENTS = [
+    "# coral: part of whole.coral",  # a header where the compiler accepts one
+    "# coral: part of the retry fix (#12)",  # a malformed one
+    "#coral:part of other.coral",
+    "# plain",
+]
+
+
+@st.composite
+def with_part_comments(draw: st.DrawFn) -> str:
+    """A generated mission broken between any two tokens by comments that read like a
+    part's header (well formed or not), after code or alone on their line, and maybe
+    one before the first statement."""
+    text = format_mission(draw(missions()))
+    starts = [0]
+    for line in text.split("\n"):
+        starts.append(starts[-1] + len(line) + 1)
+    tokens, _ = tokenize(text, "gen.coral")
+    pieces = [draw(st.sampled_from(["", "", *(c + "\n" for c in _PART_COMMENTS)]))]
+    at = 0
+    for token, following in pairwise(tokens):
+        end = starts[token.end_line - 1] + token.end_col - 1
+        pieces.append(text[at:end])
+        at = end
+        if token.kind in (Kind.INT, Kind.FLOAT) and following.kind is Kind.IDENT:
+            continue
+        comment = draw(st.sampled_from(_PART_COMMENTS))
+        choice = draw(st.integers(0, 6))
+        pieces.append(
+            ["  " + comment + "\n", "\n" + comment + "\n", "\n", "\n" + comment + "\n\n"][choice]
+            if choice < 4
+            else text[at : starts[following.line - 1] + following.col - 1]
+        )
+        at = starts[following.line - 1] + following.col - 1
+    pieces.append(text[at:])
+    return "".join(pieces)
+
+
+@pytest.mark.slow
+@given(with_part_comments())
+@settings(max_examples=60, deadline=None)
+def test_formatting_keeps_the_compile_diagnostics_of_part_header_comments(text: str) -> None:
+    formatted = format_source(text, "gen.coral")
+    assert _compile_codes(formatted) == _compile_codes(text)
+    assert _comments(formatted) == _comments(text)
+    assert format_source(formatted, "gen.coral") == formatted
 
 
 _CODES = ["CORAL201", "CORAL202", "CORAL203", "CORAL204", "CORAL205", "CORAL207", "CORAL209"]
