@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from analysis.cli_options import PROG, Settings, output_conflict, resolve
+from analysis.cli_options import PROG, Settings, output_conflict, read_conflict, resolve
 from analysis.outcome import EXIT_ERRORS, EXIT_USAGE, FileOutcome, worst_exit_code
 from coral_lang.cliframe import print_error, tool_version
 
@@ -27,7 +27,14 @@ if TYPE_CHECKING:
     from analysis.signing import SigningKey
     from analysis.verify import VerifyOptions
 
-__all__ = ["SIGNING_KEY_ENV", "STDIN", "read_stdin_once", "run_check", "run_verify"]
+__all__ = [
+    "SIGNING_KEY_ENV",
+    "STDIN",
+    "read_stdin_once",
+    "refused_output",
+    "run_check",
+    "run_verify",
+]
 
 STDIN = "-"
 """The file name that means standard input (shown as ``<stdin>``)."""
@@ -72,6 +79,22 @@ def _check_one(
     return outcome
 
 
+def refused_output(
+    outputs: Sequence[tuple[str, str | Path | None]],
+    settings: Settings,
+    outcome: FileOutcome | None = None,
+    *,
+    extra: Sequence[tuple[str, str | Path | None]] = (),
+) -> bool:
+    """Whether an output would overwrite a file the run read (`read_conflict`), after
+    saying so: checked once the settings are known, then after each file is compiled
+    (its includes are known only then), always before anything is written."""
+    conflict = read_conflict(outputs, settings, () if outcome is None else (outcome,), extra=extra)
+    if conflict is not None:
+        print_error(PROG, conflict)
+    return conflict is not None
+
+
 # -- check and lint ---------------------------------------------------------------------
 
 
@@ -89,7 +112,7 @@ def run_check(args: argparse.Namespace, *, lint_only: bool) -> int:
         print_error(PROG, str(exc))
         return EXIT_USAGE
     settings = resolve(args)
-    if settings is None:
+    if settings is None or refused_output([("-o", args.output)], settings):
         return EXIT_USAGE
     # The structural facts (invariants, siphons...) appear in JSON and HTML only.
     verify = (
@@ -103,6 +126,8 @@ def run_check(args: argparse.Namespace, *, lint_only: bool) -> int:
     printed = False
     for file in args.files:
         outcome = _check_one(file, settings, verify, stdin)
+        if refused_output([("-o", args.output)], settings, outcome):
+            return EXIT_USAGE  # before the next file's work, and before writing anything
         outcomes.append(outcome)
         if streaming:  # a terminal sees each file as soon as it is done
             block = render_outcome(outcome, lint_only=lint_only, color=color, quiet=args.quiet)
@@ -162,12 +187,14 @@ def run_verify(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     key, expires = signing
     settings = resolve(args)
-    if settings is None:
+    outputs = [("-o", args.output), ("--certificate", args.certificate)]
+    key_file = [("the signing key", args.signing_key)]
+    if settings is None or refused_output(outputs, settings, extra=key_file):
         return EXIT_USAGE
     stdin = read_stdin_once([args.file])
     verify = settings.verify_options(args, structural=True)
     outcome = _check_one(args.file, settings, verify, stdin)
-    if outcome.input_error is not None:
+    if outcome.input_error is not None or refused_output(outputs, settings, outcome):
         return EXIT_USAGE
     shown = outcome.path
     if outcome.diagnostics:

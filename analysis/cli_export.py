@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from analysis.cli_check import STDIN, read_stdin_once
+from analysis.cli_check import STDIN, read_stdin_once, refused_output
 from analysis.cli_options import (
     PROG,
     add_config_options,
@@ -67,8 +67,9 @@ def run_export(args: argparse.Namespace) -> int:
     if conflict is not None:
         print_error(PROG, f"export: {conflict}")
         return EXIT_USAGE
+    outputs = [("--pnml", args.pnml), ("--dot", args.dot)]
     settings = resolve(args)
-    if settings is None:
+    if settings is None or refused_output(outputs, settings):
         return EXIT_USAGE
     stdin = read_stdin_once([args.file])
     outcome = check_file(
@@ -76,6 +77,8 @@ def run_export(args: argparse.Namespace) -> int:
     )
     if outcome.input_error is not None:
         print_error(PROG, f"cannot read '{outcome.path}': {outcome.input_error}")
+        return EXIT_USAGE
+    if refused_output(outputs, settings, outcome):  # an include of the mission
         return EXIT_USAGE
     net = outcome.result.net if outcome.result is not None else None
     if outcome.errors or net is None:

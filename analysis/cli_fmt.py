@@ -29,7 +29,15 @@ from analysis.cli_options import PROG
 from analysis.outcome import EXIT_ERRORS, EXIT_OK, EXIT_USAGE, worst_exit_code
 from coral_lang.cliframe import print_error
 
-__all__ = ["FMT_EPILOG", "FMT_HELP", "NO_NEWLINE", "configure_fmt", "run_fmt", "unified_diff"]
+__all__ = [
+    "FMT_EPILOG",
+    "FMT_HELP",
+    "NO_NEWLINE",
+    "configure_fmt",
+    "diff_lines",
+    "run_fmt",
+    "unified_diff",
+]
 
 FMT_HELP = (
     "Rewrite missions in the canonical layout (comments kept). With --check or --diff "
@@ -154,16 +162,26 @@ def unified_diff(before: str, after: str, shown: str) -> list[str]:
     """
     lines: list[str] = []
     for line in difflib.unified_diff(
-        before.splitlines(keepends=True),
-        after.splitlines(keepends=True),
+        diff_lines(before),
+        diff_lines(after),
         fromfile=shown,
         tofile=f"{shown} (formatted)",
     ):
-        if line.endswith(("\n", "\r")):
+        if line.endswith("\n"):
             lines.append(line)
         else:
             lines += [line + "\n", NO_NEWLINE]
     return lines
+
+
+def diff_lines(text: str) -> list[str]:
+    """``text``'s lines as diff and patch see them: ended by ``\\n`` only, each keeping
+    its end. `str.splitlines` also breaks at form feeds, ``\\v``, ``\\x1c``-``\\x1e``,
+    ``\\x85``, U+2028 and U+2029, which a comment may hold: a diff cut there would not
+    apply."""
+    lines = text.split("\n")
+    last = lines.pop()
+    return [line + "\n" for line in lines] + ([last] if last else [])
 
 
 def _replace(path: Path, text: str) -> None:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -35,6 +35,7 @@ from coral_lang.cliframe import (
 from coral_lang.diagnostics import ProfileError
 
 if TYPE_CHECKING:
+    from analysis.outcome import FileOutcome
     from analysis.pipeline import CheckOptions
     from analysis.verify import VerifyOptions
     from coral_lang.profile import VehicleProfile
@@ -55,6 +56,7 @@ __all__ = [
     "add_version_option",
     "output_conflict",
     "output_or_stdout",
+    "read_conflict",
     "resolve",
 ]
 
@@ -99,12 +101,46 @@ def output_conflict(
             given) and ``-`` (standard output) are never in conflict.
         inputs: The input files; ``-`` (standard input) is skipped.
     """
+    return _conflict(outputs, [(f"the input file '{source}'", source) for source in inputs])
+
+
+def read_conflict(
+    outputs: Sequence[tuple[str, str | Path | None]],
+    settings: Settings,
+    outcomes: Iterable[FileOutcome] = (),
+    *,
+    extra: Sequence[tuple[str, str | Path | None]] = (),
+) -> str | None:
+    """Why these outputs cannot be written because the run READ one of them (None when
+    they can): a profile or the config file (known once the settings are resolved), a
+    file a mission includes (known only once it is compiled: `FileOutcome.sources`), or
+    an ``extra`` ``(what, path)`` such as the signing key. `output_conflict` sees only
+    the files named on the command line; this is the check made after compiling and
+    before writing anything (``check pool.coral -o abort.coral`` would replace a part
+    of the mission with its report).
+    """
+    inputs: list[tuple[str, str | Path]] = [(f"{what} '{p}'", p) for what, p in extra if p]
+    inputs += [(f"the profile '{path}'", path) for path in settings.profile_paths]
+    if settings.config.path is not None:
+        inputs.append((f"the configuration file '{settings.config.path}'", settings.config.path))
+    for outcome in outcomes:
+        inputs += [
+            (f"'{name}', which {outcome.path} reads", name)
+            for name in outcome.sources
+            if not name.startswith("<")  # <stdin>: no file
+        ]
+    return _conflict(outputs, inputs)
+
+
+def _conflict(
+    outputs: Sequence[tuple[str, str | Path | None]], inputs: Sequence[tuple[str, str | Path]]
+) -> str | None:
     given = [(option, path) for option, path in outputs if path is not None and str(path) != "-"]
     for option, path in given:
-        for source in inputs:
+        for what, source in inputs:
             if str(source) != "-" and _same_file(path, source):
                 return (
-                    f"{option} '{path}' is the input file '{source}': refusing to overwrite it; "
+                    f"{option} '{path}' is {what}: refusing to overwrite it; "
                     "write the output elsewhere"
                 )
     for i, (option, path) in enumerate(given):
@@ -337,6 +373,8 @@ class Settings:
     ignore: tuple[str, ...]
     values: dict[str, Any]
     config: Config
+    profile_paths: tuple[Path, ...] = ()
+    """The ``--profile`` (or config) files read: no output may overwrite them."""
 
     def lint_options(self) -> LintOptions:
         return LintOptions(link_rtt_s=float(self.values["link_rtt"]))
@@ -404,6 +442,7 @@ def resolve(args: argparse.Namespace) -> Settings | None:
         ignore=tuple(pick("ignore", ())),
         values={name: pick(name, default) for name, default in DEFAULTS.items()},
         config=config,
+        profile_paths=profile_paths,
     )
 
 

@@ -124,7 +124,7 @@ def run_main(
     """
     args = list(sys.argv[1:] if argv is None else argv)
     if default_command is not None:
-        misplaced = _misplaced_command(parser, args)
+        misplaced = _misplaced_command(parser, args, default_command)
         if misplaced is not None:
             parser.print_usage(sys.stderr)
             print_error(parser.prog, misplaced)
@@ -159,26 +159,91 @@ def _needs_default(parser: argparse.ArgumentParser, args: Sequence[str]) -> bool
     return args[0] not in _command_names(parser)
 
 
-def _misplaced_command(parser: argparse.ArgumentParser, args: Sequence[str]) -> str | None:
+def _misplaced_command(
+    parser: argparse.ArgumentParser, args: Sequence[str], default_command: str
+) -> str | None:
     """Why ``args`` would be misread, or None: options before a command's name
     (``coral-check --no-config lint m.coral``). The shorthand would take them for the
     default command's and the name for a file. The arguments are not reordered
-    silently: an option taking a value makes that ambiguous (``--config lint``)."""
+    silently: an option taking a value makes that ambiguous (``--config lint``).
+
+    Only the first positional argument can be a command's name: the leading options
+    are walked with the default command's option table, so an option's value that
+    happens to be a command's name (``coral-run --sim --out run m.coral``) is a value.
+    """
     if not args or not args[0].startswith("-") or args[0] in ("-", "-h", "--help", "--version"):
         return None
-    names = _command_names(parser)
-    for index, arg in enumerate(args):
-        if arg == "--":
-            break
-        if arg in names:
-            import shlex
+    index = _first_positional(_option_table(parser, default_command), args)
+    if index is None or args[index] not in _command_names(parser):
+        return None
+    import shlex
 
-            fixed = shlex.join([parser.prog, arg, *args[:index], *args[index + 1 :]])
-            return (
-                f"options go after the command name: {fixed} "
-                f"(a file named '{arg}' is given as ./{arg})"
-            )
+    arg = args[index]
+    fixed = shlex.join([parser.prog, arg, *args[:index], *args[index + 1 :]])
+    return f"options go after the command name: {fixed} (a file named '{arg}' is given as ./{arg})"
+
+
+def _option_table(
+    parser: argparse.ArgumentParser, default_command: str
+) -> dict[str, argparse.Action]:
+    """The options the shorthand's arguments are read with: the top level's, then the
+    default command's (which win, as they are the ones argparse will use)."""
+    table = dict(parser._option_string_actions)
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            command = action.choices.get(default_command)
+            if command is not None:
+                table.update(command._option_string_actions)
+    return table
+
+
+def _lookup(table: dict[str, argparse.Action], option: str) -> argparse.Action | None:
+    """The action of ``option``, also when abbreviated (``--lim`` for ``--limit``) as
+    argparse allows; None when it names no option, or more than one."""
+    if option in table:
+        return table[option]
+    if option.startswith("--"):
+        matches = {id(a): a for name, a in table.items() if name.startswith(option)}
+        if len(matches) == 1:
+            return next(iter(matches.values()))
     return None
+
+
+def _first_positional(table: dict[str, argparse.Action], args: Sequence[str]) -> int | None:
+    """The index of the first argument that is neither an option nor an option's value;
+    None when there is none before ``--`` (after it everything is a file)."""
+    index = 0
+    while index < len(args):
+        arg = args[index]
+        if arg == "--":
+            return None
+        if arg == "-" or not arg.startswith("-"):
+            return index
+        index += 1
+        if arg.startswith("--") and "=" in arg:
+            continue  # --opt=value is one argument
+        action = _lookup(table, arg)
+        # None: -oVALUE or a cluster of short flags (one argument), or an unknown
+        # option, which argparse reports; either way no value follows.
+        if action is not None:
+            index = _skip_values(action.nargs, args, index)
+    return None
+
+
+def _skip_values(nargs: int | str | None, args: Sequence[str], index: int) -> int:
+    """The index after the values an option with ``nargs`` takes from ``args[index:]``."""
+    if nargs is None:
+        return index + 1
+    if isinstance(nargs, int):
+        return index + nargs
+    if nargs == argparse.OPTIONAL:
+        takes = index < len(args) and not args[index].startswith("-")
+        return index + 1 if takes else index
+    if nargs in (argparse.ZERO_OR_MORE, argparse.ONE_OR_MORE):
+        while index < len(args) and not args[index].startswith("-"):
+            index += 1
+        return index
+    return index  # SUPPRESS, PARSER, REMAINDER: nothing the shorthand reads
 
 
 def print_error(prog: str, message: str) -> None:

@@ -633,3 +633,71 @@ def test_an_output_over_an_input_is_refused(
     out = tmp_path / "out.txt"
     assert main(["verify", str(mission), "-o", str(out), "--certificate", str(out)]) == 2
     assert "are the same file" in capsys.readouterr().err
+
+
+@pytest.fixture
+def pool_copy(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, bytes]:
+    """A copy of the pool mission (its parts and profile) as the current folder; the
+    bytes of each file, to show that a refused run wrote nothing."""
+    import shutil
+
+    for file in (EXAMPLES / "pool_mission").iterdir():
+        if file.is_file():
+            shutil.copy(file, tmp_path / file.name)
+    monkeypatch.chdir(tmp_path)
+    return {file.name: file.read_bytes() for file in tmp_path.iterdir()}
+
+
+@pytest.mark.parametrize(
+    ("argv", "read"),
+    [
+        (["check", "pool_mission.coral", "-o", "abort.coral"], "'abort.coral', which"),
+        (["verify", "pool_mission.coral", "--certificate", "docking.coral"], "'docking.coral'"),
+        (
+            ["export", "pool_mission.coral", "--dot", "go_to_operating_site.coral"],
+            "'go_to_operating_site.coral', which pool_mission.coral reads",
+        ),
+        (
+            [
+                "lint",
+                "pool_mission.coral",
+                "--profile=romeo.yaml",
+                "--format=json",
+                "-o",
+                "romeo.yaml",
+            ],
+            "the profile 'romeo.yaml'",
+        ),
+        (["lint", "abort.coral", "-o", "pool_mission.coral"], "'pool_mission.coral', which"),
+        (["verify", "pool_mission.coral", "-o", "./waypoint_navigation.coral"], "reads"),
+        (["export", "pool_mission.coral", "--pnml", "./abort.coral"], "'abort.coral', which"),
+    ],
+)
+def test_an_output_over_a_file_the_run_reads_is_refused_and_nothing_is_written(
+    pool_copy: dict[str, bytes],
+    argv: list[str],
+    read: str,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """An include, a part's mission or a profile is known only once the mission is
+    compiled (or the settings resolved): refused then, before anything is written."""
+    assert main(argv) == 2, argv
+    err = capsys.readouterr().err
+    assert read in err and "refusing to overwrite it" in err, err
+    assert {f.name: f.read_bytes() for f in Path.cwd().iterdir()} == pool_copy
+
+
+def test_an_output_over_the_config_file_or_the_signing_key_is_refused(
+    pool_copy: dict[str, bytes], capsys: pytest.CaptureFixture[str]
+) -> None:
+    Path("coral.toml").write_text("")  # found from the current folder: read
+    assert main(["check", "pool_mission.coral", "-o", "coral.toml"]) == 2
+    assert re.search(r"is the configuration file '\S*coral\.toml'", capsys.readouterr().err)
+    assert Path("coral.toml").read_text() == ""
+    assert main(["keygen", "--out", "key"]) == 0
+    capsys.readouterr()
+    before = {f.name: f.read_bytes() for f in Path.cwd().iterdir()}
+    argv = ["verify", "pool_mission.coral", "--signing-key", "key", "--certificate", "key"]
+    assert main(argv) == 2
+    assert "the signing key 'key'" in capsys.readouterr().err
+    assert {f.name: f.read_bytes() for f in Path.cwd().iterdir()} == before

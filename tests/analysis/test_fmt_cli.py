@@ -155,12 +155,18 @@ def test_a_symlink_is_written_through_to_its_target(
     assert f"reformatted {link}" in capsys.readouterr().err
 
 
+def _lines(text: str) -> list[str]:
+    """Lines ended by "\\n" only, as patch reads them (never `str.splitlines`)."""
+    *ended, last = text.split("\n")
+    return [line + "\n" for line in ended] + ([last] if last else [])
+
+
 def _apply_unified_diff(before: str, diff: str) -> str:
     """Apply a one-file unified diff as patch does, honouring the
     "\\ No newline at end of file" marker (a deliberately small, strict reader)."""
-    old = before.splitlines(keepends=True)
+    old = _lines(before)
     out: list[str] = []
-    lines = diff.splitlines(keepends=True)
+    lines = _lines(diff)
     assert lines[0].startswith("--- ") and lines[1].startswith("+++ ")
     at = 0  # next line of `old` not yet copied
     last: list[str] | None = None  # the list the previous diff line went to
@@ -198,7 +204,7 @@ def test_diff_without_a_final_newline_is_a_proper_unified_diff(
     formatted = format_source(text, str(path))
     assert main(["fmt", "--diff", str(path)]) == 1
     diff = capsys.readouterr().out
-    lines = diff.splitlines(keepends=True)
+    lines = _lines(diff)
     assert all(line.endswith("\n") for line in lines)
     assert all(line[0] in " -+@\\" for line in lines[2:]), diff
     assert (cli_fmt.NO_NEWLINE in lines) is not final_newline
@@ -224,3 +230,46 @@ def test_the_diff_applies_with_patch_when_it_is_installed(
         [patch, "-s", str(path), str(diff)], check=True, cwd=tmp_path, capture_output=True
     )
     assert path.read_text() == format_source(MESSY.rstrip("\n"), str(path))
+
+
+ODD_BREAKS = (
+    "mission m\nvehicle ROMEO\n# page\x0cbreak, line\u2028separator, \x85 \x1c\x1d\x1e \v end\n"
+    "place   a = 1,b\nfinal {b}\ntransition t wait {a} signal {b}  # x\u2029y\x0cz"
+)
+"""A mission whose comments hold every character `str.splitlines` breaks at but diff
+and patch do not (no final newline either)."""
+
+
+def _fmt_diff(path: Path, text: str, capsys: pytest.CaptureFixture[str]) -> str:
+    path.write_text(text, encoding="utf-8", newline="")
+    assert main(["fmt", "--diff", str(path)]) == 1
+    return capsys.readouterr().out
+
+
+def test_the_diff_of_comments_with_odd_line_breaks_applies(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "m.coral"
+    diff = _fmt_diff(path, ODD_BREAKS, capsys)
+    hunk = [line for line in _lines(diff) if line.startswith("-#")]
+    assert hunk == [], diff  # the comment line is unchanged: context, never cut in two
+    assert _apply_unified_diff(ODD_BREAKS, diff) == format_source(ODD_BREAKS, str(path))
+
+
+def test_the_diff_of_odd_line_breaks_applies_with_patch(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import shutil
+    import subprocess
+
+    patch = shutil.which("patch")
+    if patch is None:
+        pytest.skip("no patch program")
+    path = tmp_path / "m.coral"
+    diff = tmp_path / "m.diff"
+    diff.write_text(_fmt_diff(path, ODD_BREAKS, capsys), encoding="utf-8", newline="")
+    subprocess.run(
+        [patch, "-s", str(path), str(diff)], check=True, cwd=tmp_path, capture_output=True
+    )
+    expected = format_source(ODD_BREAKS, str(path))
+    assert path.read_bytes().decode("utf-8") == expected

@@ -30,6 +30,9 @@ def _parser() -> argparse.ArgumentParser:
     check.add_argument("files", nargs="+")
     check.add_argument("--fast", action="store_true")
     check.add_argument("--limit", type=positive_int, default=1)
+    check.add_argument("-o", "--out")
+    check.add_argument("--tags", nargs="*", default=[])
+    check.add_argument("--level", nargs="?", const="all")
     commands.add_parser("lint").add_argument("files", nargs="+")
     return parser
 
@@ -85,6 +88,48 @@ def test_options_before_a_command_name_are_refused_with_the_right_order(
     # after "--" a name is a file
     code, args = _run(["--fast", "--", "lint"])
     assert code == 7 and args is not None and args.files == ["lint"]
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--out", "lint", "a.coral"],
+        ["-o", "lint", "a.coral"],
+        ["--fast", "--out", "lint", "a.coral"],
+        ["--ou", "lint", "a.coral"],  # an abbreviation argparse accepts
+        ["--out=lint", "a.coral"],
+        ["-olint", "a.coral"],
+        ["--level", "lint", "a.coral"],
+    ],
+)
+def test_an_option_s_value_naming_a_command_is_a_value(argv: list[str]) -> None:
+    code, args = _run(argv)
+    assert code == 7 and args is not None, argv
+    assert args.command == "check" and args.files == ["a.coral"], argv
+    assert "lint" in (args.out, args.level), argv
+
+
+@pytest.mark.parametrize(
+    ("argv", "fixed"),
+    [
+        (["--out", "x", "lint", "a.coral"], "tool lint --out x a.coral"),
+        (["--level", "--fast", "lint", "a.coral"], "tool lint --level --fast a.coral"),
+        (["--tags", "--out=x", "lint", "a"], "tool lint --tags --out=x a"),
+    ],
+)
+def test_a_command_name_after_options_and_their_values_is_refused(
+    argv: list[str], fixed: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert _run(argv) == (EXIT_USAGE, None)
+    assert f"options go after the command name: {fixed}" in capsys.readouterr().err
+
+
+def test_only_the_first_positional_can_be_a_command() -> None:
+    """``tool --fast a.coral lint``: the first file decides; ``lint`` is a second file."""
+    code, args = _run(["--fast", "a.coral", "lint"])
+    assert code == 7 and args is not None and args.files == ["a.coral", "lint"]
+    code, args = _run(["--tags", "t1", "t2", "--fast", "a.coral"])
+    assert code == 7 and args is not None and args.tags == ["t1", "t2"]
 
 
 def test_a_reader_that_goes_away_is_exit_2_not_a_traceback(

@@ -112,6 +112,27 @@ def test_the_shorthand_is_the_run_command() -> None:
     assert build_run_parser().epilog == build_parser().epilog  # one text of the exit codes
 
 
+@pytest.mark.parametrize("value", ["run", "timeline", "fuzz"])
+def test_an_option_value_naming_a_command_is_a_value_in_the_shorthand(value: str) -> None:
+    """``coral-run --sim --out run m.coral``: ``run`` is the output folder, not a
+    misplaced command (the options are read with the run command's option table)."""
+    parsed: list[argparse.Namespace] = []
+
+    def keep(args: argparse.Namespace) -> int:
+        parsed.append(args)
+        return 0
+
+    argv = ["--sim", "--out", value, "m.coral"]
+    assert run_main(build_parser(), argv, keep, default_command="run") == 0
+    (args,) = parsed
+    assert (args.command, args.mission, args.out) == ("run", "m.coral", Path(value))
+
+
+def test_a_command_after_run_options_is_still_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--sim", "--out", "x", "timeline", "log.jsonl"]) == 2
+    assert "options go after the command name: coral-run timeline" in capsys.readouterr().err
+
+
 FLAGS = ["--seed", "--speed", "--time-limit", "--vehicle", "--watch", "--out", "--link", "-q"]
 
 
