@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import random
-from collections.abc import Callable, Coroutine
+from collections.abc import AsyncIterator, Callable, Coroutine
 from pathlib import Path
 
 import pytest
@@ -32,26 +33,25 @@ def survey() -> Net:
     return compile_text(SURVEY)
 
 
-def run_with(
-    net: Net, tmp: Path, script: Script, *, link: str = "lan"
-) -> tuple[RunResult, list[OperatorOutcome], list[Event]]:
-    """Run ``net`` against the simulator in virtual time, ``script`` beside it."""
-    rng = random.Random(3)
-    log_path = tmp / "controller.sqlite"
-
-    async def main() -> tuple[RunResult, list[OperatorOutcome]]:
-        loop = asyncio.get_running_loop()
-        server = VehicleServer(
-            Vehicle(default_config(), seed=1),
-            PSK,
-            clock=loop.time,
-            nonces=random.Random(2).randbytes,
-            log=lambda line: None,
-        )
-        mem = MemoryLink(server, LinkEmulator(BUILTIN_PROFILES[link], seed=4))
-        log = EventLog.create(log_path, role="controller", mission=net.name, meta={})
-        try:
-            controller = Controller.start_new(
+@contextlib.asynccontextmanager
+async def _simulated_run(
+    net: Net, log_path: Path, rng: random.Random, *, link: str = "lan"
+) -> AsyncIterator[tuple[Controller, VehicleServer]]:
+    """A controller for ``net`` (hand-approved) on the simulated ROMEO over ``link``, in
+    memory, logging to ``log_path``; the log, the link and the vehicle are closed after."""
+    loop = asyncio.get_running_loop()
+    server = VehicleServer(
+        Vehicle(default_config(), seed=1),
+        PSK,
+        clock=loop.time,
+        nonces=random.Random(2).randbytes,
+        log=lambda line: None,
+    )
+    mem = MemoryLink(server, LinkEmulator(BUILTIN_PROFILES[link], seed=4))
+    log = EventLog.create(log_path, role="controller", mission=net.name, meta={})
+    try:
+        yield (
+            Controller.start_new(
                 Engine(net, hand_approved(net)),
                 mem,
                 PSK,
@@ -61,16 +61,29 @@ def run_with(
                 nonces=rng.randbytes,
                 console=lambda line: None,
                 options=ControllerOptions(time_limit=600.0),
-            )
+            ),
+            server,
+        )
+    finally:
+        log.close()
+        await mem.aclose()
+        await server.stop()
+
+
+def run_with(
+    net: Net, tmp: Path, script: Script, *, link: str = "lan"
+) -> tuple[RunResult, list[OperatorOutcome], list[Event]]:
+    """Run ``net`` against the simulator in virtual time, ``script`` beside it."""
+    rng = random.Random(3)
+    log_path = tmp / "controller.sqlite"
+
+    async def main() -> tuple[RunResult, list[OperatorOutcome]]:
+        async with _simulated_run(net, log_path, rng, link=link) as (controller, _):
             operator = asyncio.create_task(script(controller))
             result = await controller.run()
             outcomes = await operator
             late = await controller.operate(OperatorAction("pause", "test"))
             assert late == OperatorOutcome(False, "the run has ended")
-        finally:
-            log.close()
-            await mem.aclose()
-            await server.stop()
         return result, outcomes
 
     result, outcomes = run_virtual(main())
@@ -191,34 +204,9 @@ def test_an_input_given_with_no_connection_sends_its_commands_on_the_next_one(
     log_path = tmp_path / "controller.sqlite"
 
     async def main() -> tuple[RunResult, OperatorOutcome, int]:
-        loop = asyncio.get_running_loop()
-        server = VehicleServer(
-            Vehicle(default_config(), seed=1),
-            PSK,
-            clock=loop.time,
-            nonces=random.Random(2).randbytes,
-            log=lambda line: None,
-        )
-        mem = MemoryLink(server, LinkEmulator(BUILTIN_PROFILES["lan"], seed=4))
-        log = EventLog.create(log_path, role="controller", mission=net.name, meta={})
-        try:
-            controller = Controller.start_new(
-                Engine(net, hand_approved(net)),
-                mem,
-                PSK,
-                log,
-                mission_id=rng.getrandbits(63),
-                now=loop.time(),
-                nonces=rng.randbytes,
-                console=lambda line: None,
-                options=ControllerOptions(time_limit=600.0),
-            )
+        async with _simulated_run(net, log_path, rng) as (controller, server):
             outcome = await controller.operate(OperatorAction("give", "cli 127.0.0.1:9", "abort"))
             result = await controller.run()
-        finally:
-            log.close()
-            await mem.aclose()
-            await server.stop()
         return result, outcome, server.stats.commands
 
     result, outcome, carried_out = run_virtual(main())

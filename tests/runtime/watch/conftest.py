@@ -4,14 +4,16 @@ about two seconds), and the net it carries rebuilt independently of `runtime.wat
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
 
 import pytest
 
 from coral_lang.net import Net, Place, Transition
 from runtime.cli import main as coral_run
+from runtime.watch.server import WatchServer
 from tests.conftest import EXAMPLES
 
 POOL_MISSION = EXAMPLES / "pool_mission" / "pool_mission.coral"
@@ -24,6 +26,16 @@ NET = json.dumps(
     }
 )
 """A one-transition net as a log's header carries it, for the servers' tests."""
+
+
+@contextlib.asynccontextmanager
+async def serving(server: WatchServer) -> AsyncIterator[str]:
+    """``server`` started (its URL), and stopped on the way out whatever happened."""
+    url = await server.start()
+    try:
+        yield url
+    finally:
+        await server.stop()
 
 
 def run(test: Callable[[], Awaitable[None]]) -> None:

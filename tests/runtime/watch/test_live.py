@@ -24,7 +24,7 @@ from runtime.watch.feed import LiveFeed
 from runtime.watch.live import LiveWatch, TokenFile, serve_live
 from runtime.watch.server import Watch, WatchError, WatchServer
 from runtime.watch.source import LogReader
-from tests.runtime.watch.conftest import NET, run
+from tests.runtime.watch.conftest import NET, run, serving
 
 
 class FakeRun:
@@ -250,15 +250,11 @@ def test_a_log_server_cannot_operate(tmp_path: Path) -> None:
 
     async def test() -> None:
         server = WatchServer(Watch(reader), port=0)
-        url = await server.start()
-        try:
-            async with aiohttp.ClientSession() as client:
-                async with client.get(f"{url}rights") as reply:
-                    assert await reply.json() == {"view": True, "operate": False}
-                status, text = await _post(client, url, {"action": "pause"}, "anything")
-                assert status == 404 and "operate from the run's own --watch server" in text
-        finally:
-            await server.stop()
+        async with serving(server) as url, aiohttp.ClientSession() as client:
+            async with client.get(f"{url}rights") as reply:
+                assert await reply.json() == {"view": True, "operate": False}
+            status, text = await _post(client, url, {"action": "pause"}, "anything")
+            assert status == 404 and "operate from the run's own --watch server" in text
 
     try:
         run(test)
@@ -288,9 +284,8 @@ def test_slow_failing_and_flooding_operators(tmp_path: Path) -> None:
             operate_rate=3,
             on_error=errors.append,
         )
-        url = await server.start()
-        token = server.operate_token
-        try:
+        async with serving(server) as url:
+            token = server.operate_token
             async with aiohttp.ClientSession() as client:
                 status, text = await _post(client, url, {"action": "pause"}, token)
                 assert status == 504 and "did not answer pause" in text
@@ -300,8 +295,6 @@ def test_slow_failing_and_flooding_operators(tmp_path: Path) -> None:
                 status, _ = await _post(client, url, {"action": "give", "input": "a"}, token)
                 assert status == 429  # 3 per second
             assert errors == [errors[0]] and "controller bug" in errors[0]  # reported once
-        finally:
-            await server.stop()
 
     try:
         run(test)
@@ -391,8 +384,7 @@ def test_a_failing_source_is_answered_500_and_reported_once() -> None:
 
     async def test() -> None:
         server = WatchServer(BrokenSource(), port=0, on_error=errors.append)
-        url = await server.start()
-        try:
+        async with serving(server) as url:
             async with aiohttp.ClientSession() as client:
                 for _ in range(2):
                     async with client.get(f"{url}snapshot") as reply:
@@ -404,8 +396,6 @@ def test_a_failing_source_is_answered_500_and_reported_once() -> None:
                     assert reply.status == 200
             assert server._follower is not None
             await asyncio.wait_for(server._follower, 1)
-        finally:
-            await server.stop()
 
     run(test)
     # snapshot and events; publishing to nobody serialised nothing, so it did not fail
@@ -458,10 +448,9 @@ def test_anonymous_viewers_cannot_take_the_operators_slots(tmp_path: Path) -> No
 
     async def test() -> None:
         server = WatchServer(LiveWatch(feed), port=0, operate=FakeRun().operate, max_viewers=4)
-        url = await server.start()
-        operator = f"{url}events?token={server.operate_token}"
-        streams: list[aiohttp.ClientResponse] = []
-        try:
+        async with serving(server) as url:
+            operator = f"{url}events?token={server.operate_token}"
+            streams: list[aiohttp.ClientResponse] = []
             async with aiohttp.ClientSession() as client:
                 for _ in range(2):
                     streams.append(await client.get(f"{url}events"))
@@ -475,8 +464,6 @@ def test_anonymous_viewers_cannot_take_the_operators_slots(tmp_path: Path) -> No
                     assert full.status == 503
                 for stream in streams:
                     stream.close()
-        finally:
-            await server.stop()
 
     try:
         run(test)

@@ -19,14 +19,13 @@ from runtime.watch.main import log_info
 from runtime.watch.server import Hub, Slot, Watch, WatchServer, needs_token
 from runtime.watch.source import LogReader
 from runtime.watch.state import snapshot_at
-from tests.runtime.watch.conftest import NET, run
+from tests.runtime.watch.conftest import NET, run, serving
 
 
-async def serving(watch: Watch, **options: object) -> WatchServer:
+def log_server(watch: Watch, **options: object) -> WatchServer:
+    """A server of ``watch`` on a free loopback port, with its log's static info."""
     options.setdefault("info", log_info(watch.reader))
-    server = WatchServer(watch, port=0, **options)  # type: ignore[arg-type]
-    await server.start()
-    return server
+    return WatchServer(watch, port=0, **options)  # type: ignore[arg-type]
 
 
 async def sse(response: aiohttp.ClientResponse) -> AsyncIterator[dict[str, object]]:
@@ -43,10 +42,10 @@ def test_a_finished_log_is_replayed(pool_log: Path) -> None:
     watch.poll()
 
     async def test() -> None:
-        server = await serving(watch)
-        assert server.token is None  # loopback: no token
-        base = server.url
-        try:
+        server = log_server(watch)
+        async with serving(server):
+            assert server.token is None  # loopback: no token
+            base = server.url
             async with aiohttp.ClientSession() as client:
                 async with client.get(base) as page:
                     assert page.status == 200
@@ -72,8 +71,6 @@ def test_a_finished_log_is_replayed(pool_log: Path) -> None:
                 long_header = {"X-Padding": "x" * 6000}  # under aiohttp's 8190, over ours
                 async with client.get(f"{base}health", headers=long_header) as reply:
                     assert reply.status == 400
-        finally:
-            await server.stop()
 
     try:
         run(test)
@@ -92,8 +89,8 @@ def test_a_live_log_is_followed_until_mission_end(tmp_path: Path) -> None:
 
     async def test() -> None:
         watch.poll_interval = 0.02
-        server = await serving(watch)
-        try:
+        server = log_server(watch)
+        async with serving(server):
             async with (
                 aiohttp.ClientSession() as client,
                 client.get(f"{server.url}events") as stream,
@@ -113,8 +110,6 @@ def test_a_live_log_is_followed_until_mission_end(tmp_path: Path) -> None:
                 assert third["live"] is False
             assert server._follower is not None
             await asyncio.wait_for(server._follower, 2)  # it stopped following by itself
-        finally:
-            await server.stop()
 
     try:
         run(test)
@@ -132,11 +127,10 @@ def test_binding_off_loopback_needs_the_token(pool_log: Path) -> None:
 
     async def test() -> None:
         server = WatchServer(watch, host="127.0.0.2", port=0)
-        await server.start()
-        token = server.token
-        assert token is not None and len(token) >= 40 and f"?token={token}" in server.url
-        base = f"http://127.0.0.2:{server.port}"
-        try:
+        async with serving(server):
+            token = server.token
+            assert token is not None and len(token) >= 40 and f"?token={token}" in server.url
+            base = f"http://127.0.0.2:{server.port}"
             async with aiohttp.ClientSession() as client:
                 for url, headers in (
                     (f"{base}/health", {}),
@@ -151,8 +145,6 @@ def test_binding_off_loopback_needs_the_token(pool_log: Path) -> None:
                 auth = {"Authorization": f"Bearer {token}"}
                 async with client.get(f"{base}/snapshot", headers=auth) as reply:
                     assert reply.status == 200
-        finally:
-            await server.stop()
 
     try:
         run(test)
@@ -165,16 +157,17 @@ def test_viewers_beyond_the_limit_get_503(pool_log: Path) -> None:
     watch = Watch(reader)
 
     async def test() -> None:
-        server = await serving(watch, max_viewers=1)
-        try:
-            async with aiohttp.ClientSession() as client, client.get(f"{server.url}events") as one:
-                await anext(sse(one))
-                async with client.get(f"{server.url}events") as two:
-                    assert two.status == 503
-                async with client.get(f"{server.url}health") as health:
-                    assert (await health.json())["viewers"] == 1
-        finally:
-            await server.stop()
+        server = log_server(watch, max_viewers=1)
+        async with (
+            serving(server),
+            aiohttp.ClientSession() as client,
+            client.get(f"{server.url}events") as one,
+        ):
+            await anext(sse(one))
+            async with client.get(f"{server.url}events") as two:
+                assert two.status == 503
+            async with client.get(f"{server.url}health") as health:
+                assert (await health.json())["viewers"] == 1
 
     try:
         run(test)
@@ -205,7 +198,8 @@ def test_a_stalled_viewer_does_not_grow_memory(pool_log: Path) -> None:
     watch = Watch(reader)
 
     async def test() -> None:
-        server = await serving(watch)
+        server = log_server(watch)
+        await server.start()
         stalled = socket.socket()
         stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         stalled.setblocking(False)
@@ -269,25 +263,21 @@ def test_snapshot_and_info_are_serialised_once_per_version() -> None:
 
     async def test() -> None:
         server = WatchServer(source, port=0, info={"mission": "m", "net_svg": "<svg/>"})
-        url = await server.start()
-        try:
-            async with aiohttp.ClientSession() as client:
-                for _ in range(20):
-                    async with client.get(f"{url}snapshot") as reply:
-                        assert await reply.json() == {"mission": "m", "version": 0}
-                assert source.newest == 1  # one serialisation for twenty requests
-                source.version = 1
+        async with serving(server) as url, aiohttp.ClientSession() as client:
+            for _ in range(20):
                 async with client.get(f"{url}snapshot") as reply:
-                    assert (await reply.json())["version"] == 1
-                assert source.newest == 2
-                async with client.get(f"{url}info") as reply:
-                    first = await reply.read()
-                server.info["mission"] = "changed"  # served bytes are the first ones
-                async with client.get(f"{url}info") as reply:
-                    assert await reply.read() == first
-                    assert reply.content_type == "application/json"
-        finally:
-            await server.stop()
+                    assert await reply.json() == {"mission": "m", "version": 0}
+            assert source.newest == 1  # one serialisation for twenty requests
+            source.version = 1
+            async with client.get(f"{url}snapshot") as reply:
+                assert (await reply.json())["version"] == 1
+            assert source.newest == 2
+            async with client.get(f"{url}info") as reply:
+                first = await reply.read()
+            server.info["mission"] = "changed"  # served bytes are the first ones
+            async with client.get(f"{url}info") as reply:
+                assert await reply.read() == first
+                assert reply.content_type == "application/json"
 
     run(test)
 
@@ -331,9 +321,8 @@ def test_without_a_token_only_requests_for_this_machine_are_answered() -> None:
 
     async def test() -> None:
         server = WatchServer(CountingSource(), port=0)
-        url = await server.start()
-        port = server.port
-        try:
+        async with serving(server) as url:
+            port = server.port
             async with aiohttp.ClientSession() as client:
                 for host in (
                     "evil.example",
@@ -359,8 +348,6 @@ def test_without_a_token_only_requests_for_this_machine_are_answered() -> None:
                         assert reply.status == 200, host
                 async with client.get(f"{url}health") as reply:  # aiohttp's own Host
                     assert reply.status == 200
-        finally:
-            await server.stop()
 
     run(test)
 
@@ -368,15 +355,12 @@ def test_without_a_token_only_requests_for_this_machine_are_answered() -> None:
 def test_with_a_token_any_host_name_may_be_used() -> None:
     async def test() -> None:
         server = WatchServer(CountingSource(), host="127.0.0.2", port=0)
-        await server.start()
-        base = f"http://127.0.0.2:{server.port}/"
-        try:
+        async with serving(server):
+            base = f"http://127.0.0.2:{server.port}/"
             async with aiohttp.ClientSession() as client:
                 headers = {"Host": "watch.example", "Authorization": f"Bearer {server.token}"}
                 async with client.get(f"{base}health", headers=headers) as reply:
                     assert reply.status == 200
-        finally:
-            await server.stop()
 
     run(test)
 
