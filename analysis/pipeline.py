@@ -147,11 +147,8 @@ def check_file(file: str | Path, options: CheckOptions) -> FileOutcome:
         name = STDIN_NAME if str(file) == STDIN else str(file)
         return FileOutcome(path=name, input_error=loaded)
     name, result = loaded
-    # `part_of` comes with mission parts (coral_lang.compiler); read defensively so the
-    # pipeline works against a compiler that predates it.
-    part_of: Path | None = getattr(result, "part_of", None)
-    if part_of is not None:
-        return _part_outcome(name, Path(file), part_of, result, options)
+    if result.part_of is not None:
+        return _part_outcome(name, Path(file), result.part_of, result, options)
     if result.net is None or result.errors:
         return make_outcome(name, result.diagnostics, sources=result.sources, result=result)
     if options.verify is None:
@@ -199,7 +196,7 @@ def _part_outcome(
         return make_outcome(
             name, result.diagnostics, sources=result.sources, result=result, part_of=str(mission)
         )
-    part: Path = getattr(result, "part_path", None) or file
+    part = result.part_path or file
     findings = _selected(lint(result, options.lint), options)
     own = [
         d
