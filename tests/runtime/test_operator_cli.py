@@ -286,14 +286,23 @@ def test_operate_drives_a_real_run_served_with_watch(tmp_path: Path) -> None:
 
 
 def _answering(raw: bytes) -> tuple[int, threading.Thread, socket.socket]:
-    """A server on 127.0.0.1 that answers one connection with ``raw`` and hangs up."""
+    """A server on 127.0.0.1 that answers one connection with ``raw`` and hangs up.
+
+    It reads until the client closes before closing itself: closing with part of the
+    request still unread (headers and body can come in separate segments) makes the
+    kernel reset the connection, and the client then sees a reset, not ``raw``."""
     listener = socket.create_server(("127.0.0.1", 0))
 
     def serve() -> None:
         connection, _ = listener.accept()
         with connection:
+            connection.settimeout(10)
             connection.recv(65536)
             connection.sendall(raw)
+            connection.shutdown(socket.SHUT_WR)
+            with contextlib.suppress(OSError):
+                while connection.recv(65536):
+                    pass
 
     thread = threading.Thread(target=serve, daemon=True)
     thread.start()
