@@ -29,11 +29,24 @@ demo: $(STAMP)
 	$(BIN)/coral-check verify $(MISSION) --format json -o out/pool_mission.verification.json
 	$(BIN)/coral-check $(MISSION) --format html -o out/pool_mission.report.html
 	@cat out/pool_mission.verification.txt
-	rm -rf out/run
+	@# Timed analysis: best and worst mission time over the Genoa-Lisbon link's delay
+	@# bounds, each query's time-out, and the schedules coral-run --schedule replays. Exit 3
+	@# (some timing not decided within the budget) still lets the demo go on.
+	rm -rf out/schedules
+	$(BIN)/coral-check verify $(MISSION) --timed --link genoa-lisbon --no-structure \
+		-o out/pool_mission.timed.txt --export-schedules out/schedules || test $$? -eq 3
+	@sed -n '/^Timing/,$$p' out/pool_mission.timed.txt
+	rm -rf out/run out/worst
 	$(BIN)/coral-run $(MISSION) --certificate out/pool_mission.certificate.json \
 		--trusted-keys $(DEMO_KEY).pub --link genoa-lisbon --seed 0 --out out/run
+	@# The worst case to mission_complete, replayed against the generic simulated vehicle.
+	$(BIN)/coral-run run $(MISSION) --certificate out/pool_mission.certificate.json \
+		--trusted-keys $(DEMO_KEY).pub --schedule out/schedules/worst-mission_complete.json \
+		--out out/worst -q
 	@echo "verification report: out/pool_mission.verification.txt (.json, .report.html)"
 	@echo "pre-mission certificate: out/pool_mission.certificate.json (signed by $(DEMO_KEY))"
+	@echo "timed analysis: out/pool_mission.timed.txt; worst and best runs: out/schedules/;"
+	@echo "                the worst case replayed: out/worst/ (logs, events.png)"
 	@echo "mission run: out/run/controller.sqlite, out/run/vehicle.sqlite (event logs),"
 	@echo "             out/run/events.png (events' sequence), out/run/telemetry.png (track, depth, heading)"
 

@@ -46,6 +46,9 @@ A certificate is JSON (format documented in ``docs/verify.md``)::
      "profile": {"vehicle": "ROMEO", "file": ".../romeo.yaml", "digest": "sha256:...",
                  "commands": {"DEPTH?": {"kind": "query", "params": [...],
                                          "replies": ["done", "timeout"], ...}}},
+     "timed": {"link": {"name": "genoa-lisbon", "min_delay_s": 0.045, ...},
+               "profiles": [{"vehicle": "ROMEO", "tolerance": 0.2, ...}],
+               "complete": true, "best_s": 160.2, "worst_s": 402.7, ...},
      "expires": "2026-12-21T07:00:00Z",
      "signature": {"algorithm": "ed25519", "key_id": "3f2a...", "value": "base64..."}}
 """
@@ -57,9 +60,10 @@ import binascii
 import datetime as dt
 import json
 import shlex
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from analysis.report import Report, Verdict
 from analysis.signing import ALGORITHM, SigningKey, TrustStore, canonical_bytes, sign_certificate
@@ -71,6 +75,10 @@ from coral_lang.mission import profile_digest
 from coral_lang.net import Net
 from coral_lang.profile import bundled_profile_path
 from coral_lang.safefile import UnreadableFile, read_text_file
+
+if TYPE_CHECKING:
+    from analysis.timed.results import TimedReport
+    from coral_lang.profile import VehicleProfile
 
 CERTIFICATE_FORMAT = 1
 Clock = Callable[[], dt.datetime]
@@ -115,6 +123,7 @@ def make_certificate(
     *,
     profile_content: Mapping[str, object] | None = None,
     expires: dt.datetime | None = None,
+    profiles: Sequence[VehicleProfile] = (),
 ) -> dict[str, object]:
     """The certificate for ``report``: its digest, verdicts and the date of issue.
 
@@ -131,9 +140,17 @@ def make_certificate(
     ``profile_content`` (`coral_lang.mission.Mission.profile_content`) is recorded as
     the ``profile`` section, with its digest; the runtime refuses a certificate without
     one, so every certificate meant for a run must be given it.
+
+    A timed verification (``report.timed``) adds a ``timed`` section (`timed_section`):
+    what was proven about time and under which assumptions (the link bounds, the timing
+    of ``profiles``, the profiles the mission was compiled against). An untimed
+    certificate has no such section, and its options no ``timed``: it says nothing
+    about time.
     """
     settings = asdict(options or VerifyOptions())
     settings.pop("progress", None)
+    if settings.get("timed") is None:
+        settings.pop("timed", None)
     profile: dict[str, object] = {}
     if profile_content is not None:
         # Through JSON, so the section is exactly what a reader of the file gets back.
@@ -170,9 +187,57 @@ def make_certificate(
         },
         **profile,
     }
+    if report.timed is not None:
+        certificate["timed"] = timed_section(report.timed, profiles)
     if expires is not None:
         certificate["expires"] = expires.astimezone(dt.UTC).strftime(TIME_FORMAT)
     return certificate
+
+
+def timed_section(timed: TimedReport, profiles: Sequence[VehicleProfile]) -> dict[str, object]:
+    """What a certificate records of timed analysis: the assumptions (link bounds, each
+    profile's timing) and only what was proven under them. Figures of an incomplete or
+    unbounded exploration are left out (None), since nothing about them was proven; a
+    query or deadline keeps its verdict, with its margin only when proven."""
+    proven = timed.complete and not timed.unbounded
+    return {
+        "link": timed.link.to_json(),
+        "profiles": [
+            {
+                "vehicle": p.name,
+                "tolerance": p.timing.tolerance,
+                "reply_latency_s": p.timing.reply_latency_s,
+            }
+            for p in profiles
+        ],
+        "complete": timed.complete,
+        "reason": timed.reason,
+        "best_s": timed.best_s if proven else None,
+        "worst_s": timed.worst_s if proven else None,
+        "finals": [
+            {"final": f.final, "best_s": f.best_s, "worst_s": f.worst_s}
+            for f in (timed.finals if proven else ())
+        ],
+        "queries": [
+            {
+                "transition": q.transition,
+                "command": q.command,
+                "time_out_s": q.time_out_s,
+                "verdict": q.verdict.value,
+                "margin_s": q.margin_s if q.verdict is Verdict.PROVEN else None,
+            }
+            for q in timed.queries
+        ],
+        "deadlines": [
+            {
+                "index": d.index,
+                "deadline_s": d.deadline_s,
+                "verdict": d.verdict.value,
+                "latest_s": d.latest_s if d.verdict is Verdict.PROVEN else None,
+            }
+            for d in timed.deadlines
+        ],
+    }
 
 
 def overall_verdict(properties: list[dict[str, object]]) -> str:
@@ -664,6 +729,7 @@ def _check_profile(
         changes = [f"vehicle {_show(recorded.get('vehicle'))} -> {_show(now.get('vehicle'))}"]
     else:
         changes = _command_changes(recorded.get("commands"), now.get("commands"))
+        changes += _changes("timing", recorded.get("timing"), now.get("timing"))
     if not changes:
         changes = ["its recorded digest does not match its recorded commands"]
     if len(changes) > MAX_LISTED_CHANGES:

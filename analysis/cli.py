@@ -52,6 +52,7 @@ from analysis.cli_options import (
     add_profile_options,
     add_rule_options,
     add_search_options,
+    add_timed_options,
     add_version_option,
 )
 from analysis.outcome import EXIT_ERRORS, EXIT_INCONCLUSIVE, EXIT_OK, EXIT_USAGE
@@ -210,6 +211,7 @@ def configure_check(parser: argparse.ArgumentParser) -> None:
     )
     _add_checking_options(parser)
     add_search_options(parser)
+    add_timed_options(parser)
 
 
 def configure_lint(parser: argparse.ArgumentParser) -> None:
@@ -253,6 +255,7 @@ def configure_verify(parser: argparse.ArgumentParser) -> None:
     )
     _add_checking_options(parser)
     add_search_options(parser)
+    add_timed_options(parser, schedules=True)
 
 
 def _add_checking_options(parser: argparse.ArgumentParser) -> None:

@@ -25,6 +25,8 @@ if TYPE_CHECKING:
     import datetime as dt
 
     from analysis.signing import SigningKey
+    from analysis.timed.results import TimedReport
+    from analysis.timed.schedule import TimedSchedule
     from analysis.verify import VerifyOptions
 
 __all__ = [
@@ -34,6 +36,7 @@ __all__ = [
     "refused_output",
     "run_check",
     "run_verify",
+    "schedule_files",
 ]
 
 STDIN = "-"
@@ -196,6 +199,15 @@ def run_verify(args: argparse.Namespace) -> int:
     outcome = _check_one(args.file, settings, verify, stdin)
     if outcome.input_error is not None or refused_output(outputs, settings, outcome):
         return EXIT_USAGE
+    schedules: list[tuple[Path, TimedSchedule]] = []
+    if args.export_schedules is not None and outcome.report is not None:
+        timed = outcome.report.timed
+        if timed is not None:
+            folder = Path(args.export_schedules)
+            schedules = [(folder / name, s) for name, s in schedule_files(timed)]
+        named = [("--export-schedules", path) for path, _ in schedules]
+        if refused_output([*outputs, *named], settings, outcome):
+            return EXIT_USAGE
     shown = outcome.path
     if outcome.diagnostics:
         print(render_all(outcome.diagnostics, outcome.sources), file=sys.stderr)
@@ -240,9 +252,69 @@ def run_verify(args: argparse.Namespace) -> int:
         and not _write_certificate(args, outcome, settings, verify, key, expires)
     ):
         return EXIT_USAGE
+    if args.export_schedules is not None and not _write_schedules(
+        Path(args.export_schedules), schedules, outcome
+    ):
+        return EXIT_USAGE
     if not _write(text, args.output):
         return EXIT_USAGE
     return outcome.exit_code()
+
+
+def schedule_files(timed: TimedReport) -> list[tuple[str, TimedSchedule]]:
+    """The schedules ``--export-schedules`` writes, with their file names: the best and
+    worst case to each final marking (``worst-mission_complete.json``), each query's
+    time-out counterexample (``timeout-check_depth.json``) and each missed deadline's
+    (``deadline-assert-3.json``). Names are stable across runs, so a script can find
+    them; a name taken twice gets ``-2``, ``-3``..."""
+    from analysis.report import Verdict
+
+    named: list[tuple[str, TimedSchedule]] = []
+    for final in timed.finals:
+        tokens = sorted(final.final.items())
+        marking = "+".join(p if n == 1 else f"{p}_x{n}" for p, n in tokens)
+        named.append((f"worst-{marking or 'empty'}", final.worst))
+        named.append((f"best-{marking or 'empty'}", final.best))
+    for query in timed.queries:
+        if query.verdict is Verdict.VIOLATED and query.counterexample is not None:
+            named.append((f"timeout-{query.transition}", query.counterexample))
+    for deadline in timed.deadlines:
+        if deadline.verdict is Verdict.VIOLATED and deadline.counterexample is not None:
+            named.append((f"deadline-assert-{deadline.index}", deadline.counterexample))
+    files: list[tuple[str, TimedSchedule]] = []
+    taken: set[str] = set()
+    for stem, schedule in named:
+        stem = "".join(c if c.isalnum() or c in "_+-." else "_" for c in stem)
+        name, number = f"{stem}.json", 1
+        while name.lower() in taken:  # case-insensitive file systems too
+            number += 1
+            name = f"{stem}-{number}.json"
+        taken.add(name.lower())
+        files.append((name, schedule))
+    return files
+
+
+def _write_schedules(
+    folder: Path, schedules: list[tuple[Path, TimedSchedule]], outcome: FileOutcome
+) -> bool:
+    """Write the schedules (`schedule_files`) into ``folder``, made if needed; say how
+    many, or why there are none (an untimed or unverified report)."""
+    if outcome.report is None or outcome.report.timed is None:
+        print(
+            f"{PROG}: no schedules written: {outcome.path} has no timed analysis "
+            "(it needs the mission's vehicle profile)",
+            file=sys.stderr,
+        )
+        return True
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for path, schedule in schedules:
+            schedule.write(path)
+    except OSError as exc:
+        print_error(PROG, f"cannot write schedules to '{folder}': {exc.strerror}")
+        return False
+    print(f"{PROG}: {len(schedules)} schedule(s) written to {folder}", file=sys.stderr)
+    return True
 
 
 def _write_certificate(
@@ -266,6 +338,7 @@ def _write_certificate(
         verify,
         profile_content=mission.profile_content(),
         expires=expires,
+        profiles=() if mission.profile is None else (mission.profile,),
     )
     if key is not None:
         from analysis.signing import sign_certificate

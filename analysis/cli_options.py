@@ -23,6 +23,7 @@ from analysis.cli_codes import parse_selectors
 from analysis.config import Config, ConfigError, resolve_config
 from analysis.lint import DEFAULT_LINK_RTT_S, LintOptions
 from analysis.terminal import COLOR_MODES
+from analysis.timed.options import DEFAULT_TIMED_STATES
 from coral_lang.cliframe import (
     existing_folder,
     non_negative_float,
@@ -37,8 +38,10 @@ from coral_lang.diagnostics import ProfileError
 if TYPE_CHECKING:
     from analysis.outcome import FileOutcome
     from analysis.pipeline import CheckOptions
+    from analysis.timed.options import TimedOptions
     from analysis.verify import VerifyOptions
     from coral_lang.profile import VehicleProfile
+    from coral_lang.timing import LinkBounds
 
 __all__ = [
     "DEFAULTS",
@@ -53,6 +56,7 @@ __all__ = [
     "add_profile_options",
     "add_rule_options",
     "add_search_options",
+    "add_timed_options",
     "add_version_option",
     "output_conflict",
     "output_or_stdout",
@@ -61,6 +65,8 @@ __all__ = [
 ]
 
 PROG = "coral-check"
+DEFAULT_LINK = "genoa-lisbon"
+"""The link timed analysis assumes unless told: the paper's experiment's."""
 
 DEFAULTS: dict[str, Any] = {
     "link_rtt": DEFAULT_LINK_RTT_S,
@@ -69,6 +75,10 @@ DEFAULTS: dict[str, Any] = {
     "max_edges": 8_000_000,
     "max_deadlocks": 20,
     "por": False,
+    "timed": False,
+    "link": DEFAULT_LINK,
+    "timed_states": DEFAULT_TIMED_STATES,
+    "timed_method": "events",
 }
 """Built-in defaults of the options a configuration file may set."""
 
@@ -121,6 +131,8 @@ def read_conflict(
     """
     inputs: list[tuple[str, str | Path]] = [(f"{what} '{p}'", p) for what, p in extra if p]
     inputs += [(f"the profile '{path}'", path) for path in settings.profile_paths]
+    if settings.link_path is not None:
+        inputs.append((f"the link profile '{settings.link_path}'", settings.link_path))
     if settings.config.path is not None:
         inputs.append((f"the configuration file '{settings.config.path}'", settings.config.path))
     for outcome in outcomes:
@@ -360,6 +372,57 @@ def add_search_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_timed_options(parser: argparse.ArgumentParser, *, schedules: bool = False) -> None:
+    """``--timed``, ``--link``, ``--timed-states`` and (``schedules``) ``--export-schedules``:
+    timed analysis (`analysis.timed`, ``docs/analysis-methods.md``)."""
+    group = parser.add_argument_group("timed analysis (docs/analysis-methods.md)")
+    group.add_argument(
+        "--timed",
+        action=argparse.BooleanOptionalAction,
+        help="also prove the best and worst mission time to each final marking, whether "
+        "each query's time-out is adequate, and the mission's 'assert within' deadlines, "
+        "with the vehicle working within its profile's bounds (default off)",
+    )
+    group.add_argument(
+        "--link",
+        metavar="NAME|FILE",
+        help="the link profile whose delay bounds timed analysis assumes: a built-in name "
+        f"or a YAML file (docs/link.md; default {DEFAULT_LINK})",
+    )
+    group.add_argument(
+        "--timed-states",
+        type=positive_int,
+        metavar="N",
+        help="symbolic states timed analysis explores before giving up "
+        f"(default {DEFAULT_TIMED_STATES})",
+    )
+    group.add_argument(
+        "--timed-method",
+        choices=["events", "clock"],
+        help="the explorer: 'events' (event times and partial-order reduction: fast with "
+        "parallel branches) or 'clock' (one global clock: the reference, to cross-check); "
+        "both give the same answers (default events)",
+    )
+    if schedules:
+        group.add_argument(
+            "--export-schedules",
+            type=schedule_folder,
+            metavar="DIR",
+            help="write the best- and worst-case schedule of each final marking and each "
+            "counterexample's schedule here as JSON (created if needed), for "
+            "'coral-run run --schedule FILE'",
+        )
+
+
+def schedule_folder(text: str) -> Path:
+    """A folder to write schedules to: refused at once when it is a file (it is created,
+    with its parents, only once there is something to write)."""
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"cannot write schedules to '{text}': it is a file")
+    return path
+
+
 # -- settings ---------------------------------------------------------------------------
 
 
@@ -375,6 +438,10 @@ class Settings:
     config: Config
     profile_paths: tuple[Path, ...] = ()
     """The ``--profile`` (or config) files read: no output may overwrite them."""
+    link: LinkBounds | None = None
+    """The link bounds timed analysis assumes; None: the run is not timed."""
+    link_path: Path | None = None
+    """The link profile file read for them (None: a built-in one)."""
 
     def lint_options(self) -> LintOptions:
         return LintOptions(link_rtt_s=float(self.values["link_rtt"]))
@@ -393,6 +460,19 @@ class Settings:
             progress=ProgressPrinter(sys.stderr, force=True) if args.progress else None,
             max_deadlocks=self.values["max_deadlocks"],
             max_edges=self.values["max_edges"],
+            timed=self.timed_options(),
+        )
+
+    def timed_options(self) -> TimedOptions | None:
+        """Timed analysis's settings, or None when the run is not timed."""
+        if self.link is None:
+            return None
+        from analysis.timed.options import TimedOptions
+
+        return TimedOptions(
+            link=self.link,
+            max_states=int(self.values["timed_states"]),
+            method=str(self.values["timed_method"]),
         )
 
     def check_options(
@@ -435,15 +515,47 @@ def resolve(args: argparse.Namespace) -> Settings | None:
     profiles = _load_profiles(profile_paths)
     if profiles is None:
         return None
+    values = {name: pick(name, default) for name, default in DEFAULTS.items()}
+    link: LinkBounds | None = None
+    link_path: Path | None = None
+    # Only a command with --timed times anything: a config file's 'timed = true' does
+    # not make 'lint' load a link profile.
+    timed = hasattr(args, "timed") and bool(values["timed"])
+    if hasattr(args, "timed") and not timed:
+        for option in ("link", "timed_states", "timed_method", "export_schedules"):
+            if getattr(args, option, None) is not None:
+                print_error(PROG, f"--{option.replace('_', '-')} applies to --timed; add it")
+                return None
+    if timed:
+        loaded = _load_link(str(values["link"]))
+        if loaded is None:
+            return None
+        link, link_path = loaded
     return Settings(
         profiles=profiles,
         include_path=tuple(pick("include_path", ())),
         select=tuple(pick("select", ())),
         ignore=tuple(pick("ignore", ())),
-        values={name: pick(name, default) for name, default in DEFAULTS.items()},
+        values=values,
         config=config,
         profile_paths=profile_paths,
+        link=link,
+        link_path=link_path,
     )
+
+
+def _load_link(spec: str) -> tuple[LinkBounds, Path | None] | None:
+    """The analysis bounds of the link profile ``spec`` (a built-in name or a YAML file)
+    and the file read, or None after saying why it cannot be used."""
+    from coral_lang.linkprofile import BUILTIN_PROFILES, LinkProfileError, load_link_profile
+
+    try:
+        profile = load_link_profile(spec)
+        bounds = profile.analysis_bounds()
+    except (LinkProfileError, ValueError) as exc:
+        print_error(PROG, f"--link: {exc}")
+        return None
+    return bounds, None if spec in BUILTIN_PROFILES else Path(spec)
 
 
 def _load_profiles(paths: tuple[Path, ...]) -> tuple[VehicleProfile, ...] | None:

@@ -14,7 +14,9 @@ option given on the command line overrides the file's value.
 Keys (docs/verify.md, "Configuration"): ``select``, ``ignore`` (lists of rule codes or
 prefixes), ``profile`` and ``include-path`` (lists of paths, relative to the file's
 folder), ``link-rtt``, ``max-states``, ``time-limit``, ``max-edges``,
-``max-deadlocks``, ``por``. Output choices (``--format``, ``-o``) stay on the command
+``max-deadlocks``, ``por``, and for timed analysis ``timed`` (true: ``--timed``),
+``link`` (a built-in link profile's name, or a YAML file relative to the file's folder)
+``timed-states`` and ``timed-method``. Output choices (``--format``, ``-o``) stay on the command
 line: a config file must not make a terminal run print JSON.
 
 A file that cannot be used is a `ConfigError` whose message names the file, the key
@@ -71,6 +73,10 @@ class Config:
     max_edges: int | None = None
     max_deadlocks: int | None = None
     por: bool | None = None
+    timed: bool | None = None
+    link: str | None = None
+    timed_states: int | None = None
+    timed_method: str | None = None
 
 
 # -- finding the file -------------------------------------------------------------------
@@ -208,6 +214,22 @@ def _count(raw: object, _folder: Path) -> int:
     return raw
 
 
+def _link(raw: object, folder: Path) -> str:
+    """A link profile: a built-in name as written, a YAML file relative to ``folder``
+    (as ``profile`` paths are); which names exist is checked when it is loaded."""
+    if not isinstance(raw, str) or not raw.strip():
+        raise ValueError(f"expected a link profile name or YAML file, got {_show(raw)}")
+    if Path(raw).suffix.lower() in (".yaml", ".yml"):
+        return str(folder / raw)
+    return raw
+
+
+def _method(raw: object, _folder: Path) -> str:
+    if raw not in ("events", "clock"):
+        raise ValueError(f"expected 'events' or 'clock', got {_show(raw)}")
+    return str(raw)
+
+
 def _flag(raw: object, _folder: Path) -> bool:
     if not isinstance(raw, bool):
         raise ValueError(f"expected true or false, got {_show(raw)}")
@@ -233,6 +255,10 @@ _READERS: dict[str, Callable[[object, Path], Any]] = {
     "max-edges": _count,
     "max-deadlocks": _count,
     "por": _flag,
+    "timed": _flag,
+    "link": _link,
+    "timed-states": _count,
+    "timed-method": _method,
 }
 KEYS: tuple[str, ...] = tuple(_READERS)
 """The keys a configuration may set, as written in the file."""

@@ -27,6 +27,7 @@ import json
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from analysis.netdraw import Layout, NetDrawing, draw_net
 from analysis.outcome import FileOutcome, worst_exit_code
@@ -38,9 +39,13 @@ from analysis.report import (
     Step,
     Verdict,
     located_findings,
+    schedule_summary,
 )
 from coral_lang.diagnostics import Span
 from coral_lang.net import Net, format_tokens
+
+if TYPE_CHECKING:
+    from analysis.timed.results import TimedReport
 
 EXCERPT_CONTEXT = 1  # source lines shown above and below a step's line in the list
 MAX_INVARIANTS_SHOWN = 50
@@ -350,6 +355,44 @@ def _statespace(report: Report) -> str:
     return f'<table class="figures"><tbody>{table}</tbody></table>{details}'
 
 
+def _timing(timed: TimedReport) -> str:
+    """Timed analysis's figures: the link assumed, each final marking's best and worst
+    time, each query's time-out and each deadline (verdicts also in the table above)."""
+    link = timed.link
+    rows = [
+        (
+            "link assumed",
+            f"{link.name}: one-way delay {link.min_delay_s:g} s to {link.max_delay_s:g} s",
+        ),
+        (
+            "exploration",
+            f"{timed.states:,} symbolic states, {timed.seconds:.3f} s"
+            + ("" if timed.complete else f"; incomplete: {timed.reason}"),
+        ),
+    ]
+    if timed.unbounded:
+        rows.append(("unbounded", timed.unbounded))
+    rows += [("best to worst", f.describe()) for f in timed.finals]
+    for q in timed.queries:
+        if q.verdict is Verdict.PROVEN:
+            text = "adequate" + ("" if q.margin_s is None else f", margin {q.margin_s:.1f} s")
+        elif q.verdict is Verdict.VIOLATED and q.counterexample is not None:
+            text = "can time out: " + schedule_summary(q.counterexample, q.transition)
+        else:
+            text = f"{q.verdict.value}: {q.detail}"
+        rows.append((f"time-out of {q.transition} ({q.command}, {q.time_out_s:g} s)", text))
+    for d in timed.deadlines:
+        if d.verdict is Verdict.VIOLATED and d.counterexample is not None:
+            text = "missed: " + schedule_summary(d.counterexample)
+        elif d.verdict is Verdict.PROVEN and d.latest_s is not None:
+            text = f"met, latest at {d.latest_s:.1f} s"
+        else:
+            text = f"{d.verdict.value}: {d.detail}"
+        rows.append((f"assert:{d.index} within {d.deadline_s:g} s", text))
+    table = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows)
+    return f'<table class="figures timing"><tbody>{table}</tbody></table>'
+
+
 def _mapping(value: object) -> Mapping[str, object]:
     return value if isinstance(value, Mapping) else {}
 
@@ -433,6 +476,8 @@ def _file_section(outcome: FileOutcome, index: int, layout: Layout) -> str:
             _counterexample(p, outcome, drawing, f"{prefix}-wit-{_anchor(p.key)}")
             for p in witnesses
         )
+    if report.timed is not None:
+        parts.append(f"<h3>Timing</h3>{_timing(report.timed)}")
     parts.append(f"<h3>State space</h3>{_statespace(report)}")
     parts.append(f"<h3>Structure</h3>{_structure(report)}")
     parts.append("</section>")

@@ -187,6 +187,7 @@ def _names_used(result: CompileResult) -> set[str]:
         elif isinstance(decl, ast.AssertDecl):
             tokens(decl.tokens)
             value(decl.bound)
+            value(decl.deadline)  # 'assert within T_MISSION { ... }'
         elif isinstance(decl, ast.TransitionDecl):
             value(decl.priority)
             tokens(decl.wait)

@@ -162,7 +162,10 @@ def check_file(file: str | Path, options: CheckOptions) -> FileOutcome:
         )
     from analysis.verify import run_verification
 
-    verification = run_verification(result.net, options.verify)
+    # Timed analysis takes work times from the profile the mission compiled against
+    # (an imported PNML net has none).
+    profiles = () if result.profile is None else (result.profile,)
+    verification = run_verification(result.net, options.verify, profiles=profiles)
     # One exploration serves both: lint's race rule reads the verifier's state space.
     findings = _selected(lint(result, options.lint, verification.space), options)
     return make_outcome(

@@ -28,6 +28,8 @@ from coral_lang.net import Net, TransitionKind, format_tokens
 
 if TYPE_CHECKING:
     from analysis.statespace import StateSpace
+    from analysis.timed.results import TimedReport
+    from analysis.timed.schedule import ScheduledCommand, TimedSchedule
 
 REPORT_FORMAT_VERSION = 1
 MAX_TRACE_STEPS = 50
@@ -329,6 +331,9 @@ class Report:
     properties: list[PropertyResult]
     structure: dict[str, object] = field(default_factory=dict)
     seconds: float = 0.0
+    timed: TimedReport | None = None
+    """What timed analysis found (``verify --timed``), figures and schedules whole; its
+    verdicts are also among `properties`. None when the verification was untimed."""
 
     @property
     def verdict(self) -> Verdict:
@@ -364,7 +369,7 @@ class Report:
             entry = prop.to_dict()
             entry["findings"] = [f.to_dict() for f in located_findings(prop, net)]
             properties.append(entry)
-        return {
+        document: dict[str, object] = {
             "format": REPORT_FORMAT_VERSION,
             "net": {"name": self.net_name, "digest": self.digest, "sources": list(self.sources)},
             "verdict": self.verdict.value,
@@ -386,6 +391,9 @@ class Report:
             "structure": self.structure,
             "seconds": round(self.seconds, 6),
         }
+        if self.timed is not None:
+            document["timed"] = self.timed.to_json()
+        return document
 
     def render_text(
         self, color: bool = False, net: Net | None = None, max_steps: int = MAX_TRACE_STEPS
@@ -430,6 +438,8 @@ class Report:
             elif result.evidence and (result.evidence.trace or result.evidence.loop):
                 lines.append("      witness:")
                 lines.extend(_render_evidence(result.evidence, max_steps))
+        if self.timed is not None:
+            lines.extend(render_timing(self.timed))
         counts = {
             v: sum(1 for p in self.properties if p.verdict is v and not p.warning) for v in Verdict
         }
@@ -440,6 +450,77 @@ class Report:
             + (f", {warnings} warning{'' if warnings == 1 else 's'}" if warnings else "")
         )
         return "\n".join(lines)
+
+
+def describe_command(command: ScheduledCommand) -> str:
+    """One scheduled command and the delays that made its reply late or early, e.g.
+    ``DEPTH? (check_depth #1) sent at 40.0 s: up 2.0 s, work 30.0 s, latency 0.1 s,
+    down 2.0 s; replied timeout, back at 74.1 s``."""
+    return (
+        f"{command.command} ({command.transition} #{command.occurrence}) sent at "
+        f"{command.sent_at:.1f} s: up {command.up_delay_s:.1f} s, work {command.work_s:.1f} s, "
+        f"latency {command.latency_s:.1f} s, down {command.down_delay_s:.1f} s; "
+        f"replied {command.reply}, back at {command.arrived_at:.1f} s"
+    )
+
+
+def schedule_summary(schedule: TimedSchedule, transition: str | None = None) -> str:
+    """What a counterexample schedule shows, in one line: the command of ``transition``
+    that replied last in it (the one that timed out), or the run's length."""
+    shown = [c for c in schedule.commands if transition is None or c.transition == transition]
+    timed_out = [c for c in shown if c.reply == "timeout"]
+    if timed_out or (transition is not None and shown):
+        return f"{schedule.reason}: {describe_command((timed_out or shown)[-1])}"
+    ends = "" if schedule.final is None else f", ending in {_format_marking(schedule.final)}"
+    return (
+        f"{schedule.reason}: {len(schedule.commands)} command(s) over "
+        f"{schedule.duration_s:.1f} s{ends}"
+    )
+
+
+def render_timing(timed: TimedReport) -> list[str]:
+    """The text report's "Timing" section: the link assumed, each final marking's best
+    and worst time, each query's time-out and each ``within`` deadline."""
+    link = timed.link
+    lines = [
+        "Timing (timed analysis):",
+        f"  link '{link.name}': one-way delay {link.min_delay_s:g} s to {link.max_delay_s:g} s; "
+        f"{timed.states} symbolic states, {timed.seconds:.3f} s",
+    ]
+    if not timed.complete:
+        lines.append(f"  incomplete: {timed.reason}; no bound below is proven")
+    if timed.unbounded:
+        lines.append(f"  unbounded: {timed.unbounded}")
+    for final in timed.finals:
+        lines.append(f"  {final.describe()}")
+    if not timed.finals:
+        lines.append("  no declared final marking is reached")
+    for query in timed.queries:
+        head = f"  time-out of {query.transition} ({query.command}, {query.time_out_s:g} s): "
+        if query.verdict is Verdict.PROVEN:
+            margin = "" if query.margin_s is None else f", margin {query.margin_s:.1f} s"
+            lines.append(head + f"adequate{margin}")
+        elif query.verdict is Verdict.VIOLATED:
+            lines.append(head + "can time out")
+            if query.counterexample is not None:
+                lines.append("      " + schedule_summary(query.counterexample, query.transition))
+        else:
+            lines.append(head + f"inconclusive: {query.detail}")
+    for deadline in timed.deadlines:
+        head = (
+            f"  assert:{deadline.index} within {deadline.deadline_s:g} s "
+            f"{_format_marking(deadline.places)}: "
+        )
+        if deadline.verdict is Verdict.PROVEN:
+            latest = "" if deadline.latest_s is None else f", latest at {deadline.latest_s:.1f} s"
+            lines.append(head + f"met{latest}")
+        elif deadline.verdict is Verdict.VIOLATED:
+            lines.append(head + "missed")
+            if deadline.counterexample is not None:
+                lines.append("      " + schedule_summary(deadline.counterexample))
+        else:
+            lines.append(head + f"inconclusive: {deadline.detail}")
+    return lines
 
 
 def _render_findings(findings: list[Finding]) -> list[str]:

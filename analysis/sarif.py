@@ -75,8 +75,13 @@ PROPERTY_RULES: dict[str, tuple[str, str]] = {
     ),
     "require": ("CORAL-V-require", "the mission's requirement can be verified"),
     "assert": ("CORAL-V-assert", "the mission's own assertion holds"),
+    "timed": (
+        "CORAL-V-timed",
+        "the mission's time is bounded and its query time-outs are adequate (verify --timed)",
+    ),
 }
-"""Property key (``assert:N`` -> ``assert``) -> (rule id, what the property says)."""
+"""Property key (``assert:N`` -> ``assert``, ``timed:timeout:T`` -> ``timed``) -> (rule
+id, what the property says)."""
 
 _LEVELS = {Severity.ERROR: "error", Severity.WARNING: "warning", Severity.NOTE: "note"}
 _VERDICT_LEVELS = {Verdict.VIOLATED: "error", Verdict.INCONCLUSIVE: "warning"}

@@ -21,10 +21,10 @@ conflicts are markings with two commands in flight that drive one vehicle resour
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -38,6 +38,7 @@ from analysis.report import (
     PropertyResult,
     Report,
     StateSpaceFigures,
+    Step,
     Verdict,
     make_trace,
     witness,
@@ -53,6 +54,7 @@ from analysis.termination import (
     final_rows,
     non_final_dead_states,
 )
+from analysis.timed.options import TimedOptions
 from coral_lang.diagnostics import Span
 from coral_lang.net import AssertKind, Net, PlaceKind, format_tokens
 
@@ -60,6 +62,9 @@ if TYPE_CHECKING:
     # Imported where the state equation runs: with the invariants and siphons it needs,
     # it costs tens of milliseconds that a completely explored net never has to pay.
     from analysis import stateeq
+    from analysis.timed.results import TimedReport
+    from analysis.timed.schedule import TimedSchedule
+    from coral_lang.profile import VehicleProfile
 
 Markings = npt.NDArray[np.int64]
 Predicate = Callable[[Markings], npt.NDArray[np.bool_]]
@@ -76,6 +81,9 @@ REALISE_NODES = 20_000  # firing orders tried to turn a state-equation solution 
 DENSE_CELL_LIMIT = 25_000_000  # places x transitions the dense encodings accept (~200 MB)
 UNBOUNDED_SECONDS = 3.0
 EXPLICIT_POR = "explicit state space (stubborn-set reduced)"
+TIMED = "timed analysis (zones)"
+UNTIMED_WITHIN = "decided by timed analysis: run coral-check verify --timed"
+NO_PROFILE = "no vehicle profile: timed analysis needs the mission's profile"
 
 
 @dataclass(frozen=True)
@@ -101,6 +109,9 @@ class VerifyOptions:
         max_edges: Edge budget of the reachability graph the termination properties
             need (`analysis.termination`; 12 bytes an edge); past it they are
             inconclusive (None: no limit).
+        timed: Also run timed analysis (`analysis.timed`) under these link bounds and
+            budget: mission time bounds, time-out adequacy, ``within`` deadlines. None:
+            untimed, and ``within`` assertions are inconclusive.
     """
 
     max_states: int | None = 2_000_000
@@ -112,13 +123,19 @@ class VerifyOptions:
     progress: ProgressCallback | None = None
     max_deadlocks: int = DEFAULT_MAX_DEADLOCKS
     max_edges: int | None = DEFAULT_MAX_EDGES
+    timed: TimedOptions | None = None
 
 
 def verify(
-    net: Net, options: VerifyOptions | None = None, *, budget: Budget | None = None
+    net: Net,
+    options: VerifyOptions | None = None,
+    *,
+    budget: Budget | None = None,
+    profiles: Sequence[VehicleProfile] = (),
 ) -> Report:
-    """Decide every property of ``net``; see the module docstring for the methods."""
-    return run_verification(net, options, budget=budget).report
+    """Decide every property of ``net``; see the module docstring for the methods.
+    ``profiles`` (the mission's vehicle profile) are what timed analysis needs."""
+    return run_verification(net, options, budget=budget, profiles=profiles).report
 
 
 @dataclass(frozen=True)
@@ -138,7 +155,11 @@ class Verification:
 
 
 def run_verification(
-    net: Net, options: VerifyOptions | None = None, *, budget: Budget | None = None
+    net: Net,
+    options: VerifyOptions | None = None,
+    *,
+    budget: Budget | None = None,
+    profiles: Sequence[VehicleProfile] = (),
 ) -> Verification:
     """`verify`, keeping the explored state space for callers that look further.
 
@@ -148,6 +169,9 @@ def run_verification(
             and switches.
         budget: The run's budget: its clock times every stage (tests pass a fake one)
             and every stage's slice ends by its deadline. None: no overall limit.
+        profiles: The vehicle profiles the mission was compiled against: timed analysis
+            takes work times from them (a PNML net has none: timed analysis is then
+            inconclusive).
     """
     options = options or VerifyOptions()
     budget = budget or Budget()
@@ -166,6 +190,9 @@ def run_verification(
         *checker.resource_conflicts(),
         *checker.assertions(),
     ]
+    timed = None
+    if options.timed is not None:
+        properties, timed = _timed(net, profiles, options.timed, properties)
     structure = checker.structure() if options.structural else {}
     report = Report(
         net_name=net.name,
@@ -175,6 +202,7 @@ def run_verification(
         properties=properties,
         structure=structure,
         seconds=budget.clock() - started,
+        timed=timed,
     )
     return Verification(report, checker.space)
 
@@ -744,6 +772,20 @@ class _Checker:
                 )
                 continue
             title = assertion.describe()
+            if assertion.kind is AssertKind.WITHIN:
+                # A deadline is about time, which the untimed state space has none of:
+                # `_timed` replaces this verdict when the verification is timed.
+                results.append(
+                    PropertyResult(
+                        key,
+                        title,
+                        Verdict.INCONCLUSIVE,
+                        self.method,
+                        UNTIMED_WITHIN,
+                        span=assertion.span,
+                    )
+                )
+                continue
             columns = [(self.net.place_index(p), w) for p, w in assertion.places]
 
             def covers(
@@ -912,6 +954,146 @@ class _Checker:
             )
         facts["siphons_traps"] = {"summary": summary}
         return facts
+
+
+# -- timed analysis -----------------------------------------------------------------------
+
+
+def _timed(
+    net: Net,
+    profiles: Sequence[VehicleProfile],
+    options: TimedOptions,
+    properties: list[PropertyResult],
+) -> tuple[list[PropertyResult], TimedReport | None]:
+    """The untimed ``properties`` with timed analysis's verdicts added (``timed:bounds``,
+    ``timed:timeout:T`` per query) and put in place of the ``within`` assertions'
+    (``assert:N``); and the whole `TimedReport` (None when it could not run)."""
+    within = {
+        f"assert:{n}": a
+        for n, a in enumerate(net.assertions, start=1)
+        if a.kind is AssertKind.WITHIN
+    }
+    bounds_title = "Mission time is bounded"
+    report: TimedReport | None = None
+    if not profiles:
+        reason = NO_PROFILE
+    else:
+        analyse = _timed_analyser()
+        if isinstance(analyse, str):
+            reason = analyse
+        else:
+            report = analyse(net, profiles, options)
+            reason = report.reason if not report.complete else report.unbounded
+    if report is None or not report.complete or report.unbounded:
+        bounds = PropertyResult(
+            "timed:bounds", bounds_title, Verdict.INCONCLUSIVE, TIMED, reason or "incomplete"
+        )
+    else:
+        figures = "; ".join(f.describe() for f in report.finals)
+        bounds = PropertyResult(
+            "timed:bounds",
+            bounds_title,
+            Verdict.PROVEN,
+            TIMED,
+            figures or "every run ends; no declared final marking is reached",
+        )
+    deadlines = {} if report is None else {f"assert:{d.index}": d for d in report.deadlines}
+    result = []
+    for prop in properties:
+        assertion = within.get(prop.key)
+        if assertion is None:
+            result.append(prop)
+            continue
+        deadline = deadlines.get(prop.key)
+        if deadline is None:
+            why = reason or "timed analysis gave no verdict on it"
+            result.append(
+                PropertyResult(
+                    prop.key, prop.title, Verdict.INCONCLUSIVE, TIMED, why, span=assertion.span
+                )
+            )
+            continue
+        evidence = None
+        if deadline.verdict is Verdict.VIOLATED and deadline.counterexample is not None:
+            evidence = _schedule_evidence(net, deadline.counterexample, None)
+        result.append(
+            PropertyResult(
+                prop.key,
+                prop.title,
+                deadline.verdict,
+                TIMED,
+                deadline.detail,
+                evidence,
+                assertion.span,
+            )
+        )
+    result.append(bounds)
+    for query in () if report is None else report.queries:
+        span = query.span
+        if span is None:
+            try:
+                span = net.transition(query.transition).span
+            except KeyError:
+                span = None
+        evidence = None
+        if query.verdict is Verdict.VIOLATED and query.counterexample is not None:
+            evidence = _schedule_evidence(net, query.counterexample, query.transition)
+        detail = query.detail
+        if query.verdict is Verdict.PROVEN and query.margin_s is not None and not detail:
+            detail = f"margin {query.margin_s:.1f} s"
+        result.append(
+            PropertyResult(
+                f"timed:timeout:{query.transition}",
+                f"Time-out of {query.transition} ({query.command}, {query.time_out_s:g} s) "
+                "is adequate",
+                query.verdict,
+                TIMED,
+                detail,
+                evidence,
+                span,
+                items=(query.transition,),
+                required=False,
+            )
+        )
+    return result, report
+
+
+TimedAnalyser = Callable[[Net, Sequence["VehicleProfile"], TimedOptions], "TimedReport"]
+
+
+def _timed_analyser() -> TimedAnalyser | str:
+    """`analysis.timed.analyse_timed`, looked up when called (so tests can replace it)."""
+    from analysis import timed
+
+    return cast(TimedAnalyser, timed.analyse_timed)
+
+
+def _schedule_evidence(net: Net, schedule: TimedSchedule, transition: str | None) -> Evidence:
+    """A timed counterexample as a trace anyone can replay on the net (each step says
+    when it fires), with the schedule's summary as the note."""
+    from analysis.report import schedule_summary
+
+    steps: list[Step] = []
+    for firing in schedule.firings:
+        try:
+            index = net.transition_index(firing.transition)
+        except KeyError:
+            continue
+        (step,) = make_trace(net, [index], start=len(steps) + 1)
+        steps.append(
+            Step(
+                number=step.number,
+                transition=step.transition,
+                kind=step.kind,
+                description=f"at {firing.time:.1f} s: {step.description}",
+                span=step.span,
+                command=step.command,
+                reply=step.reply,
+            )
+        )
+    return Evidence(
+        trace=tuple(steps), marking=schedule.final, note=schedule_summary(schedule, transition)
+    )
 
 
 def _covering(places: tuple[tuple[str, int], ...], label: str) -> stateeq.BadMarkings:

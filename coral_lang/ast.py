@@ -144,16 +144,23 @@ class AssertKind(enum.Enum):
     NEVER = "never"
     REACHABLE = "reachable"
     BOUND = "bound"
+    WITHIN = "within"
 
 
 @dataclass(slots=True)
 class AssertDecl:
-    """``assert never {a, b}``, ``assert reachable {p}``, ``assert bound p <= k``."""
+    """``assert never {a, b}``, ``assert reachable {p}``, ``assert bound p <= k``,
+    ``assert within 600 s {p}``.
+
+    ``deadline`` (a time, or a constant's name) is set for ``within`` only; it comes
+    last so that the positional form of the other kinds stays as it was.
+    """
 
     kind: AssertKind
     tokens: tuple[TokenRef, ...]
     bound: Number | Name | None = None
     span: Span = field(default=_NOWHERE, compare=False, repr=False)
+    deadline: Number | Name | None = None
 
 
 # -- temporal properties -------------------------------------------------------------------

@@ -51,7 +51,7 @@ from coral_lang.net import (
     Value,
 )
 from coral_lang.parser import parse
-from coral_lang.printer import format_temporal
+from coral_lang.printer import format_declaration, format_temporal
 from coral_lang.profile import CommandSpec, ParamSpec, VehicleProfile, load_bundled_profile
 from coral_lang.properties import Names, PropertyLowering, TransitionInfo
 from coral_lang.safefile import MISSION_LIMIT, UnreadableFile, is_within, read_text_file
@@ -744,10 +744,16 @@ class _Compiler:
     def _assertions(
         self, places: dict[str, _PlaceInfo], consts: dict[str, _ConstInfo]
     ) -> dict[int, Assertion]:
-        """``never``, ``reachable`` and ``bound``, by position among the declarations."""
+        """``never``, ``reachable``, ``bound`` and ``within``, by position among the
+        declarations."""
         assertions: dict[int, Assertion] = {}
         for position, (declaration, _) in enumerate(self.declarations):
             if not isinstance(declaration, ast.AssertDecl):
+                continue
+            if declaration.kind is ast.AssertKind.WITHIN:
+                within = self._within(declaration, places, consts)
+                if within is not None:
+                    assertions[position] = within
                 continue
             tokens = self._tokens(declaration.tokens, places, consts, "an assertion")
             bound = None
@@ -760,6 +766,87 @@ class _Compiler:
                     AssertKind(declaration.kind.value), tokens, bound, declaration.span
                 )
         return assertions
+
+    def _within(
+        self,
+        declaration: ast.AssertDecl,
+        places: dict[str, _PlaceInfo],
+        consts: dict[str, _ConstInfo],
+    ) -> Assertion | None:
+        """``assert within T { ... }``: the places (at least one) and the deadline in
+        seconds. Only timed analysis decides it; the net carries it for that."""
+        tokens = self._tokens(declaration.tokens, places, consts, "an assertion")
+        if not declaration.tokens:
+            self.error(
+                "CORAL005",
+                "'assert within' names no place, so it would hold at the start",
+                declaration.span,
+                "name the places the mission must mark in time, e.g. "
+                "'assert within 600 s { done }'",
+            )
+        assert declaration.deadline is not None  # the parser always sets it for 'within'
+        deadline = self._deadline(declaration.deadline, consts)
+        if tokens is None or deadline is None or not declaration.tokens:
+            return None
+        return Assertion(
+            AssertKind.WITHIN,
+            tokens,
+            span=declaration.span,
+            text=format_declaration(declaration)[0],
+            deadline_s=deadline,
+        )
+
+    def _deadline(
+        self, value: ast.Number | ast.Name, consts: dict[str, _ConstInfo]
+    ) -> float | None:
+        """The deadline of ``assert within`` in seconds: a time with its unit (a bare
+        number would leave the reader to guess seconds or minutes), above 0 and finite
+        once converted (``1e308 h`` is not)."""
+        resolved = self._resolve(value, consts)
+        if resolved is None:
+            return None
+        via: tuple[str, ...] = ()
+        if isinstance(value, ast.Name):
+            via = (f"'{value.name}' is defined at {consts[value.name].decl.span}",)
+        what = "the deadline of 'assert within'"
+        time_units = ", ".join(u for u in units.UNITS if units.dimension(u) == "time")
+        if not isinstance(resolved, ast.Number):
+            self.error(
+                "CORAL005", f"{what} must be a time, got {_show(resolved)}", value.span, *via
+            )
+            return None
+        if resolved.unit is None:
+            self.error(
+                "CORAL005",
+                f"{what} needs a time unit: write '{_show(resolved)} s' ({time_units})",
+                value.span,
+                *via,
+            )
+            return None
+        dimension = units.dimension(resolved.unit)
+        if dimension != "time":
+            self.error(
+                "CORAL005",
+                f"{what} must be a time ({time_units}), got '{_show(resolved)}' ({dimension})",
+                value.span,
+                *via,
+            )
+            return None
+        seconds = units.convert(float(resolved.value), resolved.unit, "s")
+        if not math.isfinite(seconds):
+            self.error(
+                "CORAL005", f"{what} is out of range, got {_show(resolved)}", value.span, *via
+            )
+            return None
+        if seconds <= 0:
+            self.error(
+                "CORAL005",
+                f"{what} must be more than 0 s, got {_show(resolved)}",
+                value.span,
+                *via,
+            )
+            return None
+        return seconds
 
     def _temporal(
         self,

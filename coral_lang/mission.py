@@ -148,11 +148,17 @@ def profile_content(net: Net, profile: VehicleProfile | None) -> dict[str, objec
             spec = profile.command(name)
             if spec is not None:
                 commands[name] = spec.canonical()
-    return {
+    content: dict[str, object] = {
         "vehicle": profile.name if profile is not None else net.vehicle,
         "file": profile.file if profile is not None else None,
         "commands": commands,
     }
+    # The timing block only when the profile declares one: timed analysis assumed it,
+    # and every certificate issued before it existed keeps its digest.
+    timing = profile.canonical_timing() if profile is not None else None
+    if timing is not None:
+        content["timing"] = timing
+    return content
 
 
 def profile_digest(content: Mapping[str, object]) -> str:
@@ -162,5 +168,7 @@ def profile_digest(content: Mapping[str, object]) -> str:
     content read back from a certificate's JSON as for content just computed.
     """
     covered = {key: content.get(key) for key in DIGEST_FIELDS}
+    if content.get("timing") is not None:
+        covered["timing"] = content["timing"]
     blob = json.dumps(covered, sort_keys=True, separators=(",", ":"))
     return "sha256:" + hashlib.sha256(blob.encode()).hexdigest()

@@ -164,13 +164,16 @@ class AssertKind(enum.Enum):
     BOUND = "bound"  # the place never holds more than `bound` tokens
     LTL = "ltl"  # `formula` (``A φ``) holds on every run, under the runtime's fairness
     CTL = "ctl"  # the CTL `formula` holds in the initial marking
+    WITHIN = "within"  # every run marks at least these places within `deadline_s` seconds
 
 
 @dataclass(frozen=True)
 class Assertion:
     """A property written in the mission with ``assert``.
 
-    ``never``, ``reachable`` and ``bound`` name ``places`` (and a ``bound``); the
+    ``never``, ``reachable`` and ``bound`` name ``places`` (and a ``bound``);
+    ``within`` names ``places`` and its ``deadline_s`` (seconds from the mission's
+    start, > 0), decided by timed analysis only, and its ``text`` as written; the
     temporal kinds (``always``, ``eventually``, ``leadsto`` and ``ltl`` compile to
     `AssertKind.LTL`, ``ctl`` to `AssertKind.CTL`) carry their `formula` and the
     assertion as written (``text``, in the printer's layout) for reports.
@@ -182,6 +185,7 @@ class Assertion:
     span: Span | None = None
     formula: Formula | None = None
     text: str = ""
+    deadline_s: float | None = None
 
     @property
     def temporal(self) -> bool:
@@ -195,21 +199,38 @@ class Assertion:
         body = _token_list(self.places)
         if self.kind is AssertKind.BOUND:
             return f"assert bound {body} <= {self.bound}"
+        if self.kind is AssertKind.WITHIN and self.deadline_s is not None:
+            # In seconds whatever unit the mission wrote: one reading for every report,
+            # and the only one a PNML import has.
+            return f"assert within {_format_seconds(self.deadline_s)} s {{ {body} }}"
         return f"assert {self.kind.value} {{ {body} }}"
 
     def canonical(self) -> list[object]:
-        """What `Net.canonical` records: the temporal kinds add the formula's text (so
-        nets without them keep their digests)."""
+        """What `Net.canonical` records: the temporal kinds add the formula's text and
+        ``within`` its deadline in seconds (so nets without them keep their digests)."""
         entry: list[object] = [self.kind.value, sorted([p, w] for p, w in self.places), self.bound]
         if self.formula is not None:
             entry.append(str(self.formula))
+        if self.kind is AssertKind.WITHIN:
+            # float: a deadline of 600 and one of 600.0 are one deadline, one digest
+            entry.append(None if self.deadline_s is None else float(self.deadline_s))
         return entry
 
 
-def _assertion_order(a: Assertion) -> tuple[str, list[list[str | int]], int, str]:
-    """The order of `Assertion.canonical` entries: by kind, places, bound, formula."""
+def _format_seconds(seconds: float) -> str:
+    """A duration in seconds as a mission writes it, without a needless ``.0``: ``600``,
+    ``0.5``, ``1e+20`` (every float prints back to itself)."""
+    if seconds.is_integer() and abs(seconds) < 1e15:
+        return str(int(seconds))
+    return repr(seconds)
+
+
+def _assertion_order(a: Assertion) -> tuple[str, list[list[str | int]], int, str, float]:
+    """The order of `Assertion.canonical` entries: by kind, places, bound, formula,
+    deadline (0 for the kinds without one, so their order is as it was)."""
     places: list[list[str | int]] = sorted([p, w] for p, w in a.places)
-    return a.kind.value, places, -1 if a.bound is None else a.bound, str(a.formula or "")
+    bound = -1 if a.bound is None else a.bound
+    return a.kind.value, places, bound, str(a.formula or ""), a.deadline_s or 0.0
 
 
 def _token_list(tokens: Iterable[tuple[str, int]]) -> str:

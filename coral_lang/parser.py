@@ -28,7 +28,7 @@ errors is not a mission, and going on only costs time and memory. One below the 
 diagnostics `render_all` shows per file, so the "stopped" note is always shown."""
 
 _TEMPORAL_KINDS = ("always", "eventually", "ltl", "ctl")
-_ASSERT_KINDS = ("never", "reachable", "bound", *_TEMPORAL_KINDS)
+_ASSERT_KINDS = ("never", "reachable", "bound", "within", *_TEMPORAL_KINDS)
 _PREFIX_OPERATORS = frozenset({"X", "F", "G", "AX", "AF", "AG", "EX", "EF", "EG"})
 _FUNCTIONS = ("in_flight", "fires", "fireable")
 _COMPARISONS = {
@@ -458,6 +458,8 @@ class _Parser:
             return ast.AssertDecl(
                 ast.AssertKind.BOUND, tokens, bound, _join(keyword, self.previous)
             )
+        if self.at_keyword("within") and self._starts_within():
+            return self.within(keyword)
         if kind_token.kind is Kind.IDENT and kind_token.text in _TEMPORAL_KINDS:
             self.advance()
             formula = self.expression(f"after 'assert {kind_token.text}'")
@@ -483,8 +485,44 @@ class _Parser:
         if kind_token.kind is Kind.IDENT:
             hint = did_you_mean(kind_token.text, _ASSERT_KINDS)
         raise self.error(
-            "expected 'never', 'reachable', 'bound', 'always', 'eventually', 'ltl', 'ctl' "
-            f"or 'P leadsto Q' after 'assert', found {kind_token.describe()}{hint}"
+            "expected 'never', 'reachable', 'bound', 'within', 'always', 'eventually', 'ltl', "
+            f"'ctl' or 'P leadsto Q' after 'assert', found {kind_token.describe()}{hint}"
+        )
+
+    def _starts_within(self) -> bool:
+        """Whether ``within`` after ``assert`` starts a deadline (``assert within 600 s
+        { done }``) rather than name a place in ``assert within leadsto done``.
+
+        ``within`` is not reserved (a mission may have a place of that name, and did
+        before the deadline existed), so the token after it decides: one that continues
+        a state expression makes it a place; anything else (a number, a constant's
+        name, ``{``, the end) makes it a deadline, and a missing duration is reported
+        as such rather than as a bad property.
+        """
+        follow = self.tokens[self.pos + 1]
+        if follow.kind is Kind.IDENT:
+            return follow.text not in ("leadsto", "and", "or")
+        return follow.kind not in _CONTINUES_TERM and follow.kind is not Kind.LPAREN
+
+    def within(self, keyword: Token) -> ast.AssertDecl:
+        """``assert within DURATION { p, q*2 }``: the deadline is a time with its unit,
+        or a constant's name; the compiler checks it is a positive time."""
+        self.advance()  # 'within'
+        token = self.tok
+        if (
+            token.kind is Kind.LBRACE
+            or token.kind is Kind.EOF
+            or (token.kind is Kind.IDENT and token.text in STATEMENT_KEYWORDS)
+        ):
+            raise self.error(
+                f"expected a duration after 'assert within', found {token.describe()}",
+                None,
+                ("write the deadline before the places, e.g. 'assert within 600 s { done }'",),
+            )
+        deadline = self.count("as the deadline of 'assert within' (a time, e.g. 600 s)")
+        tokens = self.token_set("after the deadline of 'assert within'")
+        return ast.AssertDecl(
+            ast.AssertKind.WITHIN, tokens, None, _join(keyword, self.previous), deadline
         )
 
     def _starts_leadsto(self) -> bool:

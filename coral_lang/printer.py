@@ -55,6 +55,10 @@ def format_declaration(declaration: ast.Declaration) -> list[str]:
                 else format_tokens(declaration.tokens)
             )
             return [f"assert bound {target} <= {format_value(declaration.bound)}"]
+        if declaration.kind is ast.AssertKind.WITHIN:
+            assert declaration.deadline is not None
+            deadline = format_value(declaration.deadline)
+            return [f"assert within {deadline} {format_tokens(declaration.tokens)}"]
         return [f"assert {declaration.kind.value} {format_tokens(declaration.tokens)}"]
     return _transition(declaration)
 

@@ -2,9 +2,10 @@
 
 A profile (YAML) lists the commands a vehicle accepts, their parameters (name, type,
 unit, range), the reply kinds each can produce, the vehicle resources each drives, a
-nominal duration, and for tracking (space-trap) queries the tracking criterion; optionally
-the vehicle's workspace, which plots draw. The schema is documented in ``docs/profiles.md``;
-ROMEO's profile (Table 1 of the paper) is bundled.
+nominal duration (and optionally a work time per reply kind, for timed analysis), and for
+tracking (space-trap) queries the tracking criterion; optionally the vehicle's workspace,
+which plots draw, and the timing assumptions timed analysis proves under. The schema is
+documented in ``docs/profiles.md``; ROMEO's profile (Table 1 of the paper) is bundled.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources as importlib_resources
 from pathlib import Path
 from typing import Literal, cast
@@ -20,6 +21,7 @@ from typing import Literal, cast
 from coral_lang import units
 from coral_lang.diagnostics import ProfileError, did_you_mean
 from coral_lang.safefile import PROFILE_LIMIT, UnreadableFile, read_text_file
+from coral_lang.timing import DEFAULT_REPLY_LATENCY_S, DEFAULT_TOLERANCE, ProfileTiming
 from coral_lang.yamlsource import Plain, Problems, YamlDocument, expect_keys, load_yaml
 
 ParamType = Literal["float", "int", "string"]
@@ -94,6 +96,20 @@ class CommandSpec:
     duration_s: float
     description: str = ""
     space_trap: SpaceTrap | None = None
+    work_s: tuple[tuple[str, float, float], ...] = ()
+
+    def work_interval(self, kind: str, tolerance: float) -> tuple[float, float]:
+        """The vehicle's work time for a ``kind`` reply, as [min, max] seconds.
+
+        What the profile's ``work_s`` gives for ``kind``, else ``duration_s`` spread by
+        ``tolerance`` (the profile's `ProfileTiming.tolerance`). Measured from the
+        command's arrival at the vehicle, except a query's ``done``: from the start of
+        the task it watches (``docs/analysis-methods.md``, timed analysis).
+        """
+        for name, low, high in self.work_s:
+            if name == kind:
+                return low, high
+        return self.duration_s * (1.0 - tolerance), self.duration_s * (1.0 + tolerance)
 
     def param(self, name: str) -> ParamSpec | None:
         """The parameter called ``name``, or None."""
@@ -139,7 +155,16 @@ class CommandSpec:
                 "eps": list(trap.eps),
                 "window_s": trap.window_s,
             },
-        }
+        } | self._canonical_work()
+
+    def _canonical_work(self) -> dict[str, object]:
+        """``{"work_s": {kind: [min, max]}}`` when the command declares work times, else
+        nothing: a profile without them keeps the canonical form (and so the digest of
+        every certificate) it had before work times existed. A mapping, so reordering
+        the entries in the file changes nothing."""
+        if not self.work_s:
+            return {}
+        return {"work_s": {kind: [low, high] for kind, low, high in self.work_s}}
 
 
 @dataclass(frozen=True)
@@ -152,10 +177,25 @@ class VehicleProfile:
     commands: tuple[CommandSpec, ...]
     file: str
     workspace: Workspace | None = None
+    timing: ProfileTiming = field(default_factory=ProfileTiming)
 
     def command(self, name: str) -> CommandSpec | None:
         """The command called ``name``, or None."""
         return next((c for c in self.commands if c.name == name), None)
+
+    def canonical_timing(self) -> dict[str, object] | None:
+        """The ``timing`` block as plain JSON data, or None when it is the default.
+
+        For what a certificate records: None for a profile without a ``timing`` block
+        (or one that spells out the defaults, which means the same), so that adding
+        timed analysis leaves the digest of every existing certificate as it was.
+        """
+        if self.timing == ProfileTiming():
+            return None
+        return {
+            "tolerance": self.timing.tolerance,
+            "reply_latency_s": self.timing.reply_latency_s,
+        }
 
     @property
     def command_names(self) -> tuple[str, ...]:
@@ -239,7 +279,7 @@ def parse_profile(text: str, file: str = "<profile>") -> VehicleProfile:
         root,
         "",
         ["vehicle", "commands"],
-        ["description", "resources", "version", "workspace"],
+        ["description", "resources", "version", "workspace", "timing"],
     )
     name = problems.check(_vehicle_name, doc, root["vehicle"]) if "vehicle" in root else None
     if "version" in root:
@@ -253,8 +293,12 @@ def parse_profile(text: str, file: str = "<profile>") -> VehicleProfile:
     workspace = None
     if "workspace" in root:
         workspace = problems.check(_workspace, doc, root["workspace"])
+    timing: ProfileTiming | None = ProfileTiming()
+    if "timing" in root:
+        timing = problems.check(_timing, doc, root["timing"])
     problems.raise_any()
     assert name is not None and commands is not None and description is not None
+    assert timing is not None
     return VehicleProfile(
         name=name,
         description=description,
@@ -262,7 +306,41 @@ def parse_profile(text: str, file: str = "<profile>") -> VehicleProfile:
         commands=commands,
         file=file,
         workspace=workspace,
+        timing=timing,
     )
+
+
+def _timing(doc: YamlDocument, node: Plain) -> ProfileTiming:
+    """``timing: {tolerance: 0.2, reply_latency_s: 0.1}``, both optional (defaults:
+    `DEFAULT_TOLERANCE`, `DEFAULT_REPLY_LATENCY_S`)."""
+    spec = _mapping(doc, node, "timing")
+    problems = Problems()
+    problems.check(expect_keys, doc, spec, "timing", [], ["tolerance", "reply_latency_s"])
+    tolerance: float | None = DEFAULT_TOLERANCE
+    if "tolerance" in spec:
+        tolerance = problems.check(_tolerance, doc, spec["tolerance"], "timing.tolerance")
+    latency: float | None = DEFAULT_REPLY_LATENCY_S
+    if "reply_latency_s" in spec:
+        latency = problems.check(_latency, doc, spec["reply_latency_s"], "timing.reply_latency_s")
+    problems.raise_any()
+    assert tolerance is not None and latency is not None
+    return ProfileTiming(tolerance=tolerance, reply_latency_s=latency)
+
+
+def _latency(doc: YamlDocument, node: Plain, path: str) -> float:
+    latency = _number(doc, node, path)
+    if latency < 0:
+        raise doc.error(path, f"reply latency must be >= 0 seconds, got {latency:g}")
+    return latency
+
+
+def _tolerance(doc: YamlDocument, node: Plain, path: str) -> float:
+    tolerance = _number(doc, node, path)
+    if not 0.0 <= tolerance < 1.0:
+        raise doc.error(
+            path, f"tolerance must be at least 0 and below 1 (a fraction), got {tolerance:g}"
+        )
+    return tolerance
 
 
 def _vehicle_name(doc: YamlDocument, node: Plain) -> str:
@@ -336,7 +414,7 @@ def _command(
         spec,
         path,
         ["kind", "replies"],
-        ["params", "resources", "duration_s", "description", "space_trap"],
+        ["params", "resources", "duration_s", "description", "space_trap", "work_s"],
     )
     kind = (
         problems.check(_command_kind, doc, spec["kind"], f"{path}.kind") if "kind" in spec else None
@@ -363,9 +441,21 @@ def _command(
             problems.check(_query_time_out, doc, params, path)
         if replies is not None and "timeout" not in replies[0]:
             problems.add(doc.error(f"{path}.replies", "a query must be able to reply 'timeout'"))
+    work: tuple[tuple[str, float, float], ...] | None = ()
+    if "work_s" in spec:
+        timed_query = kind == "query" and params is not None and _has_time_out(params)
+        work = problems.check(
+            _work_times,
+            doc,
+            spec["work_s"],
+            f"{path}.work_s",
+            None if replies is None else replies[0],
+            timed_query,
+        )
     problems.raise_any()
     assert kind is not None and params is not None and replies is not None
     assert used is not None and duration is not None and description is not None
+    assert work is not None
     return CommandSpec(
         name=name,
         kind=kind,
@@ -376,7 +466,70 @@ def _command(
         duration_s=duration,
         description=description,
         space_trap=trap,
+        work_s=work,
     )
+
+
+def _has_time_out(params: tuple[ParamSpec, ...]) -> bool:
+    """True if one of ``params`` is the query's ``time_out``."""
+    return any(p.name == TIME_OUT for p in params)
+
+
+def _work_times(
+    doc: YamlDocument,
+    node: Plain,
+    path: str,
+    replies: tuple[str, ...] | None,
+    has_time_out: bool,
+) -> tuple[tuple[str, float, float], ...]:
+    """``work_s: {kind: [min, max]}``: per reply kind, the vehicle's work time.
+
+    ``replies`` None: the command's reply list was malformed (already reported), so the
+    kinds are not checked against it. A query with a ``time_out`` may not give
+    ``timeout``: when it times out follows from the time-out the mission passes.
+    """
+    spec = _mapping(doc, node, path)
+    problems = Problems()
+    work: list[tuple[str, float, float]] = []
+    for kind, value in spec.items():
+        where = f"{path}.{kind}"
+        if replies is not None and kind not in replies:
+            problems.add(
+                doc.error(
+                    where,
+                    f"'{kind}' is not a reply of this command{did_you_mean(kind, replies)}; "
+                    f"its replies: {', '.join(replies)}",
+                )
+            )
+        elif kind == "timeout" and has_time_out:
+            problems.add(
+                doc.error(
+                    where,
+                    "a query's 'timeout' takes the time-out the mission gives it; "
+                    "declare the work time of its other replies only",
+                )
+            )
+        interval = problems.check(_work_interval, doc, value, where)
+        if interval is not None:
+            work.append((kind, *interval))
+    problems.raise_any()
+    return tuple(work)
+
+
+def _work_interval(doc: YamlDocument, node: Plain, path: str) -> tuple[float, float]:
+    """``[min, max]`` seconds, finite, 0 <= min <= max."""
+    pair = _list(doc, node, path)
+    if len(pair) != 2:
+        raise doc.error(path, f"expected [min, max] in seconds, got {len(pair)} values")
+    problems = Problems()
+    bounds = [problems.check(_number, doc, value, f"{path}[{i}]") for i, value in enumerate(pair)]
+    problems.raise_any()
+    low, high = (b for b in bounds if b is not None)
+    if low < 0:
+        raise doc.error(f"{path}[0]", f"work time must be >= 0 seconds, got {low:g}")
+    if low > high:
+        raise doc.error(path, f"min {low:g} s is greater than max {high:g} s")
+    return low, high
 
 
 def _command_kind(doc: YamlDocument, node: Plain, path: str) -> CommandKind:

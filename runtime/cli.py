@@ -9,6 +9,8 @@ cover that profile (``--verify`` verifies and issues one if there is none), runs
 writes the event logs to ``--out`` and draws the timeline. ``run`` is the default command:
 ``coral-run MISSION`` is the same. ``coral-run --resume LOG [...]`` continues the
 mission of a controller that died (``kill -9`` included), from the last state it committed.
+``coral-run run MISSION --schedule FILE`` replays a schedule timed analysis exported
+(`runtime.replay`) and exits 1 if the run did not follow it.
 
 ``coral-run fuzz MISSION --runs N --seed S`` runs it under N random schedules against the
 simulator (`runtime.fuzz`).
@@ -303,6 +305,14 @@ def _add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-plots", action="store_true", help="do not draw the timeline")
     parser.add_argument("-q", "--quiet", action="store_true", help="print the summary only")
     parser.add_argument(
+        "--schedule",
+        type=Path,
+        metavar="FILE",
+        help="replay a timed schedule (coral-check verify --timed --export-schedules) "
+        "against the generic simulated vehicle, in virtual time, and say whether the run "
+        "followed it (exit 1 if not)",
+    )
+    parser.add_argument(
         "--watch",
         metavar="[HOST:]PORT",
         type=_watch_address,
@@ -427,6 +437,25 @@ def _usage_problem(options: argparse.Namespace) -> str | None:
         )
     if options.speed != 1.0 and not options.realtime:
         return "--speed applies to a simulator in real time: add --realtime"
+    if options.schedule is not None:
+        clashes = [
+            flag
+            for flag, given in (
+                ("--resume", options.resume is not None),
+                ("--vehicle", options.vehicle is not None),
+                ("--realtime", options.realtime),
+                ("--link", options.link is not None),
+                ("--fault/--faults", bool(options.fault or options.faults)),
+                ("--sim-config", options.sim_config is not None),
+                ("--simulator", options.simulator not in (None, "generic")),
+            )
+            if given
+        ]
+        if clashes:
+            return (
+                f"--schedule replays a schedule against the generic simulated vehicle over "
+                f"its own link, in virtual time: drop {', '.join(clashes)}"
+            )
     for flag, given in (("--watch", options.watch is not None), ("--tui", options.tui)):
         if given and not options.realtime and options.vehicle is None:
             return f"{flag} needs a run in real time: add --realtime (or --vehicle)"
@@ -568,6 +597,15 @@ def _run(options: argparse.Namespace) -> int:
             profiles = [load_profile(path) for path in recorded_profiles]
         if not include_path:
             include_path = recorded_include_path
+    if options.schedule is not None and mission_path is not None:
+        # A bad schedule file is bad input: said before any certificate is checked.
+        from analysis.timed import ScheduleError, read_schedule
+
+        try:
+            read_schedule(options.schedule)
+        except ScheduleError as exc:
+            print(f"coral-run: {exc}", file=sys.stderr)
+            return EXIT_USAGE
     trusted = trust_store(options.trusted_keys)
     approved = approve_mission(
         mission_path,
@@ -600,6 +638,16 @@ def _run(options: argparse.Namespace) -> int:
                 console=print,
             )
         )
+    replay = None
+    sim_config = options.sim_config
+    time_limit = options.time_limit
+    if options.schedule is not None:
+        from runtime.replay import load_replay
+
+        replay = load_replay(options.schedule, approved.net)  # ReplayError: exit 2
+        link = replay.link
+        if time_limit is None:
+            time_limit = replay.time_limit
     config = RunConfig(
         out_dir=out_dir,
         psk=psk,
@@ -608,10 +656,10 @@ def _run(options: argparse.Namespace) -> int:
         vehicle=options.vehicle,
         realtime=options.realtime,
         speed=options.speed,
-        time_limit=options.time_limit,
+        time_limit=time_limit,
         console=console,
-        simulator=options.simulator,
-        sim_config=options.sim_config,
+        simulator="generic" if replay is not None else options.simulator,
+        sim_config=sim_config,
         faults=faults,
         telemetry_host=options.telemetry_host,
         log_key_ephemeral=ephemeral,
@@ -627,6 +675,12 @@ def _run(options: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
             return EXIT_USAGE
+        if replay is not None:
+            from dataclasses import replace
+
+            profile = approved.mission.profile
+            latency = profile.timing.reply_latency_s if profile is not None else 0.1
+            config = replace(config, sim_config=replay.write_settings(out_dir, latency))
         result = run_mission(approved, config)
     if options.quiet:
         print(result.summary())
@@ -644,6 +698,12 @@ def _run(options: argparse.Namespace) -> int:
         for path in plot_timeline(merge_logs(logs), out_dir):
             print(f"coral-run: wrote {path}")
     print(f"coral-run: logs in {out_dir}/")
+    if replay is not None and not result.stopped_by:
+        with EventLog.open(controller_log_path(out_dir)) as replayed:
+            verdict = replay.check(replayed, result)
+        for line in verdict.lines:
+            print(f"coral-run: {line}")
+        return EXIT_OK if verdict.followed else EXIT_MISSION_FAILED
     if result.stopped_by:
         return {"SIGINT": EXIT_SIGINT, "SIGTERM": EXIT_SIGTERM}.get(
             result.stopped_by, EXIT_MISSION_FAILED

@@ -35,7 +35,7 @@ import random
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
-from runtime.linkprofile import LinkProfile
+from coral_lang.linkprofile import LinkProfile
 
 __all__ = [
     "ConnectAttempt",
@@ -192,7 +192,7 @@ class LinkEmulator:
     """Decides, reproducibly from ``seed``, what the link does to each byte and datagram.
 
     Args:
-        profile: the impairments (`runtime.linkprofile.LinkProfile`).
+        profile: the impairments (`coral_lang.linkprofile.LinkProfile`).
         seed: any integer; the same seed and the same calls give the same fates.
     """
 

@@ -11,7 +11,7 @@ a telemetry callback fed by datagrams. Two links implement them:
 
 Both put a `LinkEmulator` (``runtime.emulator``) between the two ends when given one:
 the paper's 9600 bps line and Internet delays, stalls, losses, resets and outages, as a
-`LinkProfile` (``runtime.linkprofile``) describes them. ``docs/link.md`` has the model
+`LinkProfile` (``coral_lang.linkprofile``) describes them. ``docs/link.md`` has the model
 and every profile field. This module re-exports all of those names.
 """
 
@@ -20,9 +20,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Protocol
 
+from coral_lang.linkprofile import (
+    BUILTIN_PROFILES,
+    LinkProfile,
+    LinkProfileError,
+    load_link_profile,
+)
 from runtime.emulator import DatagramFate, Direction, LinkEmulator, Outage, StreamPath
 from runtime.linkpipe import LinkStats
-from runtime.linkprofile import BUILTIN_PROFILES, LinkProfile, LinkProfileError, load_link_profile
 from runtime.memorylink import MemoryLink
 from runtime.socketlink import SocketLink
 

@@ -15,9 +15,10 @@ What survives a round trip ``parse_pnml(to_pnml(net))``: places, transitions, ar
 their weights, initial markings, labels (stripped of surrounding white space) and every
 name. Mission-only data (place and transition kinds, capacities, commands, replies,
 priorities, resources, spans, final markings, assertions, vehicle, sources) travels in
-``<toolspecific tool="coral" version="1">`` blocks that other tools ignore. Temporal
-assertions (``always``, ``eventually``, ``leadsto``, ``ltl``, ``ctl``) are not
-exported: PNML has no syntax for their formulas.
+``<toolspecific tool="coral" version="1">`` blocks that other tools ignore (a ``within``
+assertion with its deadline in seconds, ``deadline-s``). Temporal assertions
+(``always``, ``eventually``, ``leadsto``, ``ltl``, ``ctl``) are not exported: PNML has
+no syntax for their formulas.
 """
 
 from __future__ import annotations

@@ -9,6 +9,7 @@ side builds its own small element tree instead of using ``xml.etree``.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from collections.abc import Iterator
@@ -674,6 +675,7 @@ class _Reader:
                         places=self.tokens(child),
                         bound=self.optional_int(child, "bound"),
                         span=self.span(child),
+                        deadline_s=self.deadline(child, kind),
                     )
                 )
         return _NetExtras(
@@ -683,6 +685,32 @@ class _Reader:
             assertions=tuple(assertions),
             requirements=tuple(requirements),
         )
+
+    def deadline(self, element: _Element, kind: AssertKind) -> float | None:
+        """The ``deadline-s`` of a ``within`` assertion (seconds, finite, above 0), which
+        it must have and no other kind may: a deadline read as absent would make the
+        assertion mean something else, so a fault is refused, never dropped."""
+        raw = element.attrs.get("deadline-s")
+        if kind is not AssertKind.WITHIN:
+            if raw is not None:
+                raise self.error(
+                    element,
+                    f"coral <assertion> of kind '{kind.value}' has a deadline-s: "
+                    "only 'within' takes one",
+                )
+            return None
+        if raw is None:
+            raise self.error(element, "coral <assertion> of kind 'within' has no deadline-s")
+        try:
+            seconds = float(raw)
+        except ValueError:
+            seconds = math.nan
+        if not (math.isfinite(seconds) and seconds > 0):
+            raise self.error(
+                element,
+                f"coral <assertion> deadline-s '{_short(raw)}' is not a number of seconds above 0",
+            )
+        return seconds
 
     def requirement(self, element: _Element) -> str:
         """A ``require`` line's name, refused unless the compiler knows it: a certificate

@@ -307,7 +307,14 @@ def _net_block(net: Net, ident: str) -> ET.Element | None:
     for assertion in net.assertions:
         if assertion.temporal:
             continue  # PNML has no formula syntax: temporal assertions are not exported
-        element = _element("assertion", {"kind": assertion.kind.value, "bound": assertion.bound})
+        deadline = assertion.deadline_s
+        attrs: Attrs = {
+            "kind": assertion.kind.value,
+            "bound": assertion.bound,
+            # seconds, for 'within' only; repr so that the float reads back exactly
+            "deadline-s": None if deadline is None else repr(float(deadline)),
+        }
+        element = _element("assertion", attrs)
         element.extend(_span(assertion.span) + _tokens(assertion.places))
         children.append(element)
     children += [_element("require", {"name": r}) for r in net.requirements]

@@ -25,6 +25,7 @@ from runtime.fuzz.one_run import FuzzOptions, FuzzRun, run_one, run_seed
 __all__ = [
     "Coverage",
     "FuzzReport",
+    "LinkBoundCount",
     "NeverFired",
     "Progress",
     "fuzz",
@@ -125,6 +126,43 @@ def _never_fired(net: Net, name: str) -> NeverFired:
     return NeverFired(transition=name, line=line, command=command, reply=reply)
 
 
+@dataclass(frozen=True)
+class LinkBoundCount:
+    """Messages whose one-way delay exceeded the link's analysis bound, over a campaign.
+
+    Timed analysis (``coral-check verify --timed``) assumes no message takes longer than
+    ``max_delay_s``; a run with such a message is outside what it proved (its times may
+    exceed the proven worst case). Counted per message on the command stream, both ways
+    (`runtime.fuzz.one_run.CountingEmulator`).
+
+    Attributes:
+        link: the link profile's name.
+        max_delay_s: the bound (``LinkProfile.analysis_bounds().max_delay_s``).
+        messages: stream messages delivered in all runs.
+        messages_over: how many of them took longer than the bound.
+        runs_over: runs with at least one such message.
+        longest_delay_s: the longest one-way delay of any delivered message.
+    """
+
+    link: str
+    max_delay_s: float
+    messages: int
+    messages_over: int
+    runs_over: int
+    longest_delay_s: float
+
+    def to_json(self) -> dict[str, object]:
+        """JSON-ready form (``link_bound`` in ``fuzz-report.json``)."""
+        return {
+            "link": self.link,
+            "max_delay_s": self.max_delay_s,
+            "messages": self.messages,
+            "messages_over": self.messages_over,
+            "runs_over": self.runs_over,
+            "longest_delay_s": self.longest_delay_s,
+        }
+
+
 @dataclass
 class FuzzReport:
     """The runs of one fuzz and what they add up to."""
@@ -176,6 +214,18 @@ class FuzzReport:
         """Which transitions the runs fired (None when the report has no `net`)."""
         return None if self.net is None else Coverage.of(self.net, self.runs)
 
+    def link_bound(self) -> LinkBoundCount:
+        """How often the emulated link exceeded the delay timed analysis assumes."""
+        bounds = self.options.link.analysis_bounds()
+        return LinkBoundCount(
+            link=bounds.name,
+            max_delay_s=bounds.max_delay_s,
+            messages=sum(r.messages for r in self.runs),
+            messages_over=sum(r.over_bound for r in self.runs),
+            runs_over=sum(r.over_bound > 0 for r in self.runs),
+            longest_delay_s=max((r.longest_delay for r in self.runs), default=0.0),
+        )
+
     def longest(self, count: int = 5) -> list[FuzzRun]:
         """The ``count`` longest runs, longest first."""
         return sorted(self.runs, key=lambda r: (-r.duration, r.seed))[:count]
@@ -199,6 +249,7 @@ class FuzzReport:
             "wall_seconds": self.wall_seconds,
             "schedules_per_second": self.schedules_per_second,
             "coverage": None if coverage is None else coverage.to_json(),
+            "link_bound": self.link_bound().to_json(),
         }
 
 

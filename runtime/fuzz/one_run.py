@@ -9,6 +9,16 @@ transitions, each from a generator of its own (`_rng`), so one purpose drawing m
 never shifts another. The same seed gives the same events at the same virtual times
 (`FuzzRun.events_digest`).
 
+Each run also counts the messages whose one-way delay exceeded the link's analysis bound
+(``LinkProfile.analysis_bounds().max_delay_s``): timed analysis assumes none does, so a
+run with one is outside what it proved. `CountingEmulator` counts at the emulator, where
+every delay is decided: each stream chunk is one protocol message (commands, replies,
+and the heartbeats and acknowledgements between them: the link cannot tell them apart
+through the encryption, so all are counted, a superset of the commands and replies
+analysis reasons about); its delay is arrival minus send, head-of-line blocking
+included; chunks lost with their connection and telemetry datagrams are not counted.
+Counting draws nothing and changes no fate, so a run's events are the same with it.
+
 `FuzzOptions` is plain, picklable data: the vehicle is described by a
 `runtime.simvehicle.VehicleSpec` built per run, never by a callable, so runs can be
 handed to worker processes.
@@ -32,6 +42,7 @@ from typing import TYPE_CHECKING
 from analysis.certificate import CertificateCheck
 from coral_lang.net import Net, format_tokens
 from runtime.controller import Controller, ControllerOptions, RunEnd, RunResult
+from runtime.emulator import ConnectAttempt, Direction, StreamPath
 from runtime.engine import Engine, Policy
 from runtime.eventlog import Event, EventLog
 from runtime.link import LinkEmulator, LinkProfile
@@ -46,6 +57,7 @@ if TYPE_CHECKING:
 __all__ = [
     "PSK",
     "SEED_LIMIT",
+    "CountingEmulator",
     "FuzzOptions",
     "FuzzRun",
     "events_digest",
@@ -133,6 +145,9 @@ class FuzzRun:
         log: where the controller's log was kept (failures and replays), if anywhere.
         fired: how often each net transition fired (reply transitions included: a reply
             the net consumes fires its reply transition); never-fired ones are absent.
+        messages: stream messages the link delivered, both ways (`CountingEmulator`).
+        over_bound: how many of them took longer than the link's analysis bound.
+        longest_delay: the longest one-way delay of a delivered message, s.
     """
 
     index: int
@@ -153,6 +168,9 @@ class FuzzRun:
     events: tuple[Event, ...] = field(default=(), repr=False, compare=False)
     log: Path | None = None
     fired: Mapping[str, int] = field(default_factory=dict, repr=False, compare=False)
+    messages: int = 0
+    over_bound: int = 0
+    longest_delay: float = 0.0
 
     @property
     def ok(self) -> bool:
@@ -184,7 +202,63 @@ class FuzzRun:
             "detail": self.detail,
             "log": None if self.log is None else str(self.log),
             "transitions_fired": len(self.fired),
+            "messages": self.messages,
+            "messages_over_link_bound": self.over_bound,
+            "longest_message_delay_s": self.longest_delay,
         }
+
+
+class CountingEmulator(LinkEmulator):
+    """A `LinkEmulator` that also counts the stream messages delivered later than
+    ``bound`` after they were sent (module docstring); every fate is the parent's.
+
+    Args:
+        profile: the link profile.
+        seed: the emulator's seed.
+        bound: the longest one-way delay analysis assumes, s.
+    """
+
+    def __init__(self, profile: LinkProfile, seed: int, bound: float) -> None:
+        super().__init__(profile, seed)
+        self.bound = bound
+        self.messages = 0
+        self.over_bound = 0
+        self.longest_delay = 0.0
+
+    def connect(self, now: float) -> ConnectAttempt:
+        attempt = super().connect(now)
+        path = attempt.path
+        if path is None:
+            return attempt
+        return ConnectAttempt(attempt.latency, _CountedPath(self, path), attempt.outage)
+
+    def note(self, delay: float) -> None:
+        """One message delivered ``delay`` seconds after it was sent."""
+        self.messages += 1
+        self.longest_delay = max(self.longest_delay, delay)
+        if delay > self.bound + 1e-9:
+            self.over_bound += 1
+
+
+class _CountedPath(StreamPath):
+    """A connection's streams whose delivered chunks `CountingEmulator.note` sees."""
+
+    def __init__(self, emulator: CountingEmulator, original: StreamPath) -> None:
+        super().__init__(
+            emulator,
+            original.number,
+            original.established_at,
+            original.ends_at,
+            original.end_cause,
+            original.outage,
+        )
+        self._counter = emulator
+
+    def chunk(self, direction: Direction, size: int, now: float) -> float:
+        arrival = super().chunk(direction, size, now)
+        if size > 0 and arrival < self.ends_at:  # a message, not lost with the connection
+            self._counter.note(arrival - now)
+        return arrival
 
 
 def run_seed(base: int, index: int) -> int:
@@ -237,7 +311,12 @@ def run_one(
         )
         try:
             log.relax_durability()
-            result, vehicle_commands = run_virtual(_simulate(net, approval, seed, options, log))
+            emulator = CountingEmulator(
+                options.link, seed, options.link.analysis_bounds().max_delay_s
+            )
+            result, vehicle_commands = run_virtual(
+                _simulate(net, approval, seed, options, log, emulator)
+            )
             digest, fired, events = _read_events(log, keep_events)
         finally:
             log.close()
@@ -266,6 +345,9 @@ def run_one(
         events=events,
         log=kept,
         fired=fired,
+        messages=emulator.messages,
+        over_bound=emulator.over_bound,
+        longest_delay=emulator.longest_delay,
     )
 
 
@@ -300,14 +382,19 @@ def _digest_line(event: Event) -> bytes:
 
 
 async def _simulate(
-    net: Net, approval: CertificateCheck, seed: int, options: FuzzOptions, log: EventLog
+    net: Net,
+    approval: CertificateCheck,
+    seed: int,
+    options: FuzzOptions,
+    log: EventLog,
+    emulator: LinkEmulator,
 ) -> tuple[RunResult, int]:
     """One controller run against a simulated vehicle over an emulated in-memory link."""
     model = make_vehicle(net, options, _rng(seed, "vehicle").getrandbits(63))
     async with serve_simulated(
         model,
         PSK,
-        LinkEmulator(options.link, seed=seed),
+        emulator,
         nonces=_rng(seed, "vehicle-nonces").randbytes,
     ) as (server, link):
         engine = Engine(

@@ -13,7 +13,7 @@ from collections import Counter
 from pathlib import Path
 from typing import IO
 
-from runtime.fuzz.campaign import Coverage, FuzzReport
+from runtime.fuzz.campaign import Coverage, FuzzReport, LinkBoundCount
 from runtime.fuzz.one_run import FuzzRun, run_seed
 
 __all__ = [
@@ -61,6 +61,8 @@ def format_report(report: FuzzReport, command: str) -> str:
             lines.append(
                 f"    seed {run.seed}: {run.duration:.1f} s, {run.ending()}, {_run_detail(run)}"
             )
+    if runs:
+        lines.append(_link_bound_line(report.link_bound(), total))
     coverage = report.coverage()
     if coverage is not None:
         lines.extend(_coverage_lines(coverage))
@@ -84,6 +86,20 @@ def format_report(report: FuzzReport, command: str) -> str:
         f"  {report.wall_seconds:.1f} s wall, {report.schedules_per_second:.2f} schedules/s"
     )
     return "\n".join(lines)
+
+
+def _link_bound_line(count: LinkBoundCount, total: int) -> str:
+    bound = f"the analysis bound {count.max_delay_s:.4g} s of link '{count.link}'"
+    if not count.messages_over:
+        return (
+            f"  link: no message took longer than {bound} (longest "
+            f"{count.longest_delay_s:.4g} s): every run is within what timed analysis assumes"
+        )
+    return (
+        f"  link: {count.messages_over} of {count.messages} messages, in "
+        f"{count.runs_over}/{total} run(s), took longer than {bound} (longest "
+        f"{count.longest_delay_s:.4g} s): those runs are outside what timed analysis proved"
+    )
 
 
 NEVER_SHOWN = 20

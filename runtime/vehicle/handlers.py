@@ -22,7 +22,13 @@ it. What the library does, so that every vehicle behaves as ``docs/vehicles.md``
   resources free: the old task is already stopped.
 * **Queries and actions** are polled every ``poll_s`` vehicle seconds until their handler
   names a reply kind. A command with a ``time_out`` parameter that can reply ``timeout``
-  replies ``timeout`` when that time passes, stamped with that exact time.
+  replies ``timeout`` when that time passes, stamped with that exact time; at that
+  instant it is polled one last time first, so a handler whose answer is due at or
+  before its time-out never loses to the time-out between two polls.
+* **A task that works before it replies** (``on(..., ack=poll)``): it holds its
+  resources from its arrival, and its ``ack`` poll is called every ``poll_s`` until it
+  names the reply; replaced (or stopped by the watchdog) before that, it replies
+  ``error`` (interrupted). A task without one replies when it starts.
 * **The watchdog.** After ``watchdog_s`` vehicle seconds without `heard_from_controller`
   or a command (armed by the first of them), every task is stopped, every pending query
   replies ``timeout`` and every running action ``error``, and ``on_watchdog`` runs: the
@@ -170,6 +176,12 @@ class _Running:
     deadline: float | None = None
     time_out: str = ""
     holds: tuple[str, ...] = field(default=())
+    replied: bool = False  # a task: its one reply is out (it may still hold resources)
+
+    @property
+    def polled(self) -> bool:
+        """Still waiting for a poll to name its reply."""
+        return self.handlers.poll is not None and not self.replied
 
     @property
     def kind(self) -> str:
@@ -289,19 +301,24 @@ class HandlerVehicle:
         start: StartHandler | None = None,
         poll: PollHandler | None = None,
         stop: StopHandler | None = None,
+        ack: PollHandler | None = None,
     ) -> None:
         """Register the handlers of command ``name``.
 
         * A **task** takes ``start`` (None: accept at once) and ``stop``; it replies once,
           when it starts (``start`` returning None replies its first kind, ``ack``), then
           holds its resources until another command takes them or the watchdog trips.
+          Given ``ack``, a task whose ``start`` returns None replies later: when ``ack``,
+          polled every ``poll_s``, names a kind (a vehicle that acknowledges a manoeuvre
+          only once it is under way); it holds its resources from its arrival.
         * A **query** or an **action** takes ``poll`` (and optionally ``start`` and
           ``stop``): it replies when ``start`` or a ``poll`` names a kind.
 
         Raises:
             ValueError: the profile has no such command, it already has handlers, a task
-                was given a ``poll``, or a query or action was given neither ``start`` nor
-                ``poll`` (nothing would ever make it reply).
+                was given a ``poll`` (or a query or action an ``ack``), or a query or
+                action was given neither ``start`` nor ``poll`` (nothing would ever make
+                it reply).
         """
         spec = self._profile.command(name)
         if spec is None:
@@ -312,7 +329,7 @@ class HandlerVehicle:
             )
         if name in self._handlers:
             raise ValueError(f"command {name!r} already has handlers")
-        for what, fn in (("start", start), ("poll", poll), ("stop", stop)):
+        for what, fn in (("start", start), ("poll", poll), ("stop", stop), ("ack", ack)):
             if fn is not None and not callable(fn):
                 raise ValueError(f"{what} of {name!r} must be callable, got {fn!r}")
         if spec.kind == "task" and poll is not None:
@@ -321,12 +338,14 @@ class HandlerVehicle:
                 f"{', '.join(spec.resources) or 'no resource'} until replaced; give it "
                 "start and stop, not poll"
             )
+        if spec.kind != "task" and ack is not None:
+            raise ValueError(f"{name} is a {spec.kind}: ack is for tasks; give it a poll")
         if spec.kind != "task" and start is None and poll is None:
             raise ValueError(
                 f"{name} is {'an' if spec.kind == 'action' else 'a'} {spec.kind}: give it a "
                 "poll (or a start that returns its reply kind), or nothing will ever answer it"
             )
-        self._handlers[name] = _Handlers(start, poll, stop)
+        self._handlers[name] = _Handlers(start, poll if spec.kind != "task" else ack, stop)
 
     @property
     def unhandled(self) -> tuple[str, ...]:
@@ -432,7 +451,7 @@ class HandlerVehicle:
         t = float(t)
         limit = t + _EPS
         while True:
-            polling = any(r.handlers.poll is not None for r in self._running)
+            polling = any(r.polled for r in self._running)
             next_poll = self._poll_instant(self._ticks + 1) if polling else math.inf
             at = min(next_poll, self._next_deadline())
             if at > limit:
@@ -459,6 +478,15 @@ class HandlerVehicle:
     def holders(self) -> dict[str, str]:
         """Resource -> the name of the command holding it, for status lines and tests."""
         return {res: run.job.name for res, run in self._owners.items()}
+
+    def holder(self, resources: tuple[str, ...]) -> Job | None:
+        """The one task holding every one of ``resources`` now, or None (nothing to
+        watch, a resource free, or two commands sharing them): what a query watches."""
+        owners = {id(run): run for res in resources if (run := self._owners.get(res))}
+        if not resources or len(owners) != 1 or any(r not in self._owners for r in resources):
+            return None
+        (run,) = owners.values()
+        return run.job if run.kind == "task" else None
 
     def status(self) -> list[str]:
         """One line per command still running, in arrival order."""
@@ -527,7 +555,15 @@ class HandlerVehicle:
             self._displace(run, takes)
         answer = self._call(handlers.start, run)
         if spec.kind == "task":
+            if answer is None and handlers.poll is not None:
+                # It works before it replies, holding its resources from now on.
+                run.holds = takes
+                self._running.append(run)
+                for resource in takes:
+                    self._owners[resource] = run
+                return
             kind, detail = answer if answer is not None else (spec.replies[0], "")
+            run.replied = True
             self._emit(job, kind, detail)
             # A task runs until replaced or stopped by the watchdog; one that holds nothing
             # can only be stopped by the watchdog, so it is kept only if it has a stop.
@@ -572,7 +608,7 @@ class HandlerVehicle:
         self._finish(holder)
         self._call_stop(holder)
         what = holder.kind
-        if what == "action":
+        if what == "action" or (what == "task" and not holder.replied):
             self._emit(holder.job, "error", f"interrupted: {why}")
         self._note(f"{holder.job.name} stopped: {why}")
         watched = set(holder.holds)
@@ -597,17 +633,31 @@ class HandlerVehicle:
             self._trip_watchdog()
         if poll:
             for run in list(self._running):
-                if run not in self._running or run.handlers.poll is None:
+                if run not in self._running or not run.polled:
                     continue
-                answer = self._call(run.handlers.poll, run)
-                if answer is not None and run in self._running:
-                    self._finish(run)
-                    self._emit(run.job, *answer)
+                self._answer(run, self._call(run.handlers.poll, run))
         for run in list(self._running):
             if run.deadline is not None and run.deadline <= now + _EPS and run in self._running:
+                if not poll and run.polled:  # one last look: an answer due now wins
+                    self._answer(run, self._call(run.handlers.poll, run))
+                    if run not in self._running:
+                        continue
                 self._finish(run)
                 self._call_stop(run)
                 self._emit(run.job, "timeout", f"time-out of {run.time_out} passed")
+
+    def _answer(self, run: _Running, answer: tuple[str, str] | None) -> None:
+        """A poll's answer: a query or action is done; a task replied (and holds on)."""
+        if answer is None or run not in self._running:
+            return
+        if run.kind == "task":
+            run.replied = True
+            self._emit(run.job, *answer)
+            if answer[0] == "error" or not (run.holds or run.handlers.stop is not None):
+                self._finish(run)
+            return
+        self._finish(run)
+        self._emit(run.job, *answer)
 
     def _trip_watchdog(self) -> None:
         self._tripped = True
@@ -622,7 +672,7 @@ class HandlerVehicle:
             self._call_stop(run)
             if run.kind == "query":
                 self._emit(run.job, "timeout", why)
-            elif run.kind == "action":
+            elif run.kind == "action" or not run.replied:
                 self._emit(run.job, "error", why)
         if self._on_watchdog is not None:
             try:

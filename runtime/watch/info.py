@@ -222,13 +222,28 @@ def _transition(entry: object, i: int) -> Transition:
 def _assertion(entry: object, i: int) -> Assertion:
     where = f"assertions[{i}]"
     if not isinstance(entry, list) or len(entry) not in (3, 4):
-        raise CanonicalNetError(f"net_json: {where}: expected [kind, places, bound(, formula)]")
+        raise CanonicalNetError(
+            f"net_json: {where}: expected [kind, places, bound(, formula or deadline)]"
+        )
+    kind = AssertKind(_str(entry[0], where))
     bound = entry[2]
+    deadline: float | None = None
+    text = ""
+    if kind is AssertKind.WITHIN:
+        value = entry[3] if len(entry) == 4 else None
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise CanonicalNetError(
+                f"net_json: {where}: a 'within' assertion needs its deadline in seconds"
+            )
+        deadline = float(value)
+    elif len(entry) == 4:
+        text = _str(entry[3], where)
     return Assertion(
-        AssertKind(_str(entry[0], where)),
+        kind,
         _tokens(entry[1], where),
         None if bound is None else _int(bound, where),
-        text=_str(entry[3], where) if len(entry) == 4 else "",
+        text=text,
+        deadline_s=deadline,
     )
 
 

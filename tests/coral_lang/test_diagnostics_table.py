@@ -63,8 +63,8 @@ TABLE: list[tuple[str, str]] = [
     ),
     (
         HEADER + "assert sometimes { a }\n",
-        "3:8: expected 'never', 'reachable', 'bound', 'always', 'eventually', 'ltl', 'ctl' or "
-        "'P leadsto Q' after 'assert', found 'sometimes' [CORAL001]",
+        "3:8: expected 'never', 'reachable', 'bound', 'within', 'always', 'eventually', 'ltl', "
+        "'ctl' or 'P leadsto Q' after 'assert', found 'sometimes' [CORAL001]",
     ),
     (
         HEADER + "place p\ntransition t wait { p } action { ROMEO(DEPTH, 2.0) }\n",
@@ -208,8 +208,8 @@ TABLE: list[tuple[str, str]] = [
     # temporal assertions (HEADER + PLACES + TEMPORAL, assertion on line 7)
     (
         HEADER + PLACES + TEMPORAL + "assert alwyas b\n",
-        "7:8: expected 'never', 'reachable', 'bound', 'always', 'eventually', 'ltl', 'ctl' or "
-        "'P leadsto Q' after 'assert', found 'alwyas' (did you mean 'always'?) [CORAL001]",
+        "7:8: expected 'never', 'reachable', 'bound', 'within', 'always', 'eventually', 'ltl', "
+        "'ctl' or 'P leadsto Q' after 'assert', found 'alwyas' (did you mean 'always'?) [CORAL001]",
     ),
     (
         HEADER + PLACES + TEMPORAL + "assert b and c\n",

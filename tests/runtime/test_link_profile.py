@@ -1,4 +1,6 @@
-"""runtime.linkprofile: built-in profiles, YAML files, and errors that say where."""
+"""Link profiles (``coral_lang.linkprofile``, also imported as ``runtime.linkprofile``):
+built-in profiles, YAML files, errors that say where, and the emulator's delays against
+the bounds timed analysis assumes."""
 
 from __future__ import annotations
 
@@ -7,9 +9,18 @@ import re
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from coral_lang.diagnostics import CoralError
-from runtime.linkprofile import BUILTIN_PROFILES, LinkProfile, LinkProfileError, load_link_profile
+from runtime.emulator import Direction, LinkEmulator
+from runtime.linkprofile import (
+    ANALYSIS_FRAME_BYTES,
+    BUILTIN_PROFILES,
+    LinkProfile,
+    LinkProfileError,
+    load_link_profile,
+)
 from tests.conftest import REPO
 
 DOC = (REPO / "docs" / "link.md").read_text()
@@ -132,3 +143,110 @@ def test_a_profile_built_in_code_is_checked_too() -> None:
 def test_the_jitter_median_follows_the_lomax_formula() -> None:
     p = LinkProfile(jitter_scale_s=0.02, jitter_shape=1.0)
     assert p.jitter_median_s == pytest.approx(0.02)
+
+
+def _capped_profiles() -> st.SearchStrategy[LinkProfile]:
+    """Profiles whose every delay is bounded, without loss, resets or outages (what the
+    derived analysis bound speaks about), stalls and reordering often, so the longest
+    delays are drawn."""
+    times = st.floats(0.0, 5.0)
+    return st.builds(
+        lambda delay, scale, shape, cap, stall_p, stall_a, stall_b, reorder_p, reorder, bw: (
+            LinkProfile(
+                name="capped",
+                bandwidth_bps=bw,
+                stream_overhead_bytes=40,
+                datagram_overhead_bytes=28,
+                delay_s=delay,
+                jitter_scale_s=scale,
+                jitter_shape=shape,
+                jitter_cap_s=cap,
+                stall_probability=stall_p,
+                stall_min_s=min(stall_a, stall_b),
+                stall_max_s=max(stall_a, stall_b),
+                datagram_duplicate=0.3,
+                datagram_reorder=reorder_p,
+                reorder_delay_s=reorder,
+            )
+        ),
+        times,
+        st.sampled_from([0.0, 0.001, 0.1, 1.0]),
+        st.floats(0.5, 4.0),
+        times,
+        st.sampled_from([0.0, 0.1, 0.9]),
+        times,
+        times,
+        st.sampled_from([0.0, 0.5]),
+        times,
+        st.sampled_from([None, 1200.0, 9600.0, 1e8]),
+    )
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    profile=st.one_of(
+        _capped_profiles(),
+        st.sampled_from(
+            [
+                dataclasses.replace(p, reset_rate_per_s=0.0, outage_rate_per_s=0.0)
+                for p in BUILTIN_PROFILES.values()
+            ]
+        ),
+    ),
+    seed=st.integers(0, 2**32),
+    messages=st.lists(
+        st.tuples(
+            st.floats(0.0, 3.0),
+            st.integers(0, ANALYSIS_FRAME_BYTES),
+            st.booleans(),
+            st.sampled_from(list(Direction)),
+        ),
+        min_size=1,
+        max_size=40,
+    ),
+)
+def test_emulated_delays_stay_within_the_derived_analysis_bounds(
+    profile: LinkProfile, seed: int, messages: list[tuple[float, int, bool, Direction]]
+) -> None:
+    """Any chunk or datagram of at most 4 KiB, sent when the line has carried what went
+    before, arrives within [analysis min, analysis max] of its sending, on virtual time."""
+    bounds = profile.analysis_bounds()
+    emulator = LinkEmulator(profile, seed)
+    attempt = emulator.connect(0.0)
+    assert attempt.path is not None  # no outages in these profiles
+    # One frame's line time between sends: the line is free when each message starts.
+    spacing = profile.serialisation_time(ANALYSIS_FRAME_BYTES + 40)
+    now = attempt.latency
+    for gap, size, on_stream, direction in messages:
+        now += spacing + gap
+        if on_stream:
+            arrivals: tuple[float, ...] = (attempt.path.chunk(direction, size, now),)
+        else:
+            arrivals = emulator.datagram(direction, size, now).arrivals
+            assert arrivals  # nothing is lost in these profiles
+        for arrival in arrivals:
+            assert bounds.min_delay_s - 1e-9 <= arrival - now <= bounds.max_delay_s + 1e-9
+
+
+def test_the_derived_bound_is_reached_when_every_impairment_is_at_its_worst() -> None:
+    """Not a loose bound: with stalls every time, a jitter always at its cap and every
+    datagram held back, some delays come within a few percent of it."""
+    worst = LinkProfile(
+        name="worst",
+        delay_s=0.1,
+        jitter_scale_s=10.0,
+        jitter_cap_s=0.5,
+        stall_probability=1.0,
+        stall_min_s=2.0,
+        stall_max_s=3.0,
+        datagram_reorder=1.0,
+        reorder_delay_s=1.0,
+    )
+    bound = worst.analysis_bounds().max_delay_s
+    assert bound == pytest.approx(4.6)
+    emulator = LinkEmulator(worst, seed=7)
+    delays = [
+        max(emulator.datagram(Direction.DOWN, 100, float(t)).arrivals) - t for t in range(500)
+    ]
+    assert max(delays) <= bound
+    assert max(delays) >= 0.97 * bound

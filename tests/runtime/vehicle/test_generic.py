@@ -93,15 +93,20 @@ def test_a_query_with_a_short_time_out_times_out_at_it() -> None:
     ]
 
 
-def test_tasks_ack_at_once_and_replacing_them_times_out_their_queries() -> None:
+def test_tasks_ack_after_their_work_time_and_replacing_them_times_out_their_queries() -> None:
+    # Timed model: a task's ack falls due after its work time (DIVE: 1 s +/- 20 %), not
+    # at once; it holds its resources from its arrival all the same.
     vehicle = GenericVehicle(minnow(), seed=0)
-    assert vehicle.command(1, "DIVE", {"z": 10.0}) == [Reply(1, "DIVE", "ack", 0.0)]
+    assert vehicle.command(1, "DIVE", {"z": 10.0}) == []
+    assert vehicle.holders == {"depth": "DIVE"}
     vehicle.command(2, "DEPTH?", {"z": 10.0, "time_out": 200.0})
-    vehicle.advance_to(5.0)
-    assert [r.kind for r in vehicle.command(3, "SURFACE", {})] == ["ack"]
+    (ack,) = vehicle.advance_to(5.0)
+    assert (ack.command_id, ack.kind) == (1, "ack") and 0.8 <= ack.time <= 1.3
+    assert vehicle.command(3, "SURFACE", {}) == []
     assert vehicle.advance_to(5.0) == [
         Reply(2, "DEPTH?", "timeout", 5.0, "its task DIVE was replaced by SURFACE")
     ]
+    assert [(r.command_id, r.kind) for r in vehicle.advance_to(7.0)] == [(3, "ack")]
 
 
 def test_the_pose_follows_the_tasks_targets() -> None:

@@ -104,9 +104,9 @@ def test_make_safe_replies_as_the_watchdog_would_at_the_same_moment(
 
 def test_the_generic_vehicle_heads_for_the_surface() -> None:
     vehicle = GenericVehicle(minnow(), seed=1, watchdog_s=1e6)
-    assert vehicle.command(1, "DIVE", {"z": 10.0})[0].kind == "ack"
+    assert vehicle.command(1, "DIVE", {"z": 10.0}) == []  # it acks after its work time
     vehicle.command(2, "DEPTH?", {"z": 10.0, "time_out": 600.0})
-    vehicle.advance_to(20.0)
+    assert kinds(vehicle.advance_to(20.0)) == [(1, "ack")]
     snapshot = vehicle.telemetry()
     assert snapshot is not None and snapshot.z > 5.0
     assert kinds(vehicle.make_safe("SIGINT")) == [(2, "timeout")]
