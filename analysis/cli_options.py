@@ -329,7 +329,8 @@ def add_budget_options(
     group = parser.add_argument_group("verification")
     texts = {
         "max_states": f"state budget of the explicit search (default {DEFAULTS['max_states']})",
-        "time_limit": f"time limit of the explicit search (default {DEFAULTS['time_limit']:g})",
+        "time_limit": "time limit of the explicit search, and of timed analysis "
+        f"(default {DEFAULTS['time_limit']:g})",
         "max_edges": "edge budget of the reachability graph that the termination properties "
         "need, 12 bytes an edge; past it they are inconclusive "
         f"(default {DEFAULTS['max_edges']})",
@@ -469,9 +470,11 @@ class Settings:
             return None
         from analysis.timed.options import TimedOptions
 
+        limit = self.values.get("time_limit")
         return TimedOptions(
             link=self.link,
             max_states=int(self.values["timed_states"]),
+            time_limit_s=None if limit is None else float(limit),
             method=str(self.values["timed_method"]),
         )
 

@@ -162,7 +162,7 @@ class _Search:
                 if deadline is not None and time.perf_counter() > deadline:
                     self.reason = (
                         f"stopped after {self.options.time_limit_s:g} s "
-                        f"({len(self.nodes):,} symbolic states)"
+                        f"({len(self.nodes):,} symbolic states; raise it with --time-limit)"
                     )
                     return
                 _, index = heapq.heappop(queue)
