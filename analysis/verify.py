@@ -990,13 +990,14 @@ def _timed(
         )
     else:
         figures = "; ".join(f.describe() for f in report.finals)
-        bounds = PropertyResult(
-            "timed:bounds",
-            bounds_title,
-            Verdict.PROVEN,
-            TIMED,
-            figures or "every run ends; no declared final marking is reached",
-        )
+        detail = figures or "every run ends; no declared final marking is reached"
+        if report.stuck:
+            # The bounds are to the declared finals; runs that stop elsewhere are the
+            # deadlock property's business, but the figures must not hide them.
+            stuck = "; ".join(format_tokens(sorted(m.items())) for m in report.stuck[:3])
+            more = f" and {len(report.stuck) - 3} more" if len(report.stuck) > 3 else ""
+            detail += f" (runs can also stop in a marking that is not final: {stuck}{more})"
+        bounds = PropertyResult("timed:bounds", bounds_title, Verdict.PROVEN, TIMED, detail)
     deadlines = {} if report is None else {f"assert:{d.index}": d for d in report.deadlines}
     result = []
     for prop in properties:

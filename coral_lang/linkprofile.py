@@ -255,6 +255,14 @@ def _check_analysis_bounds(profile: LinkProfile) -> tuple[str, str] | None:
         if value < 0.0:
             return name, f"must not be negative, got {value!r}"
     low, high = profile.analysis_min_delay_s, profile.analysis_max_delay_s
+    if low is not None and low > profile.derived_min_delay_s:
+        # The emulator delivers as fast as delay_s: assuming slower would hide the runs
+        # in which a fast link makes a query time out.
+        return (
+            "analysis_min_delay_s",
+            f"must not exceed delay_s, the fastest the link delivers "
+            f"({low:g} > {profile.derived_min_delay_s:g})",
+        )
     effective_low = profile.derived_min_delay_s if low is None else low
     effective_high = profile.derived_max_delay_s if high is None else high
     if effective_low > effective_high:

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,7 +47,7 @@ from typing import TYPE_CHECKING
 from analysis.timed import ScheduleError, TimedSchedule, read_schedule
 from coral_lang.diagnostics import CoralError
 from coral_lang.linkprofile import LinkProfile
-from coral_lang.net import Net, format_tokens
+from coral_lang.net import Net, TransitionKind, format_tokens
 
 if TYPE_CHECKING:
     from runtime.controller import RunResult
@@ -170,7 +171,10 @@ class Replay:
         }
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / REPLAY_SETTINGS
-        path.write_text(json.dumps(settings, indent=2) + "\n", encoding="utf-8")
+        # JSON is read back as YAML (the simulator's settings reader): YAML 1.1 takes
+        # '1e-05' for a string, so every exponent number gets its decimal point.
+        text = re.sub(r"(?<=[\s:\[,])(-?\d+)e([-+]\d+)", r"\1.0e\2", json.dumps(settings, indent=2))
+        path.write_text(text + "\n", encoding="utf-8")
         return path
 
     def check(self, log: EventLog, result: RunResult) -> ReplayVerdict:
@@ -208,9 +212,41 @@ def load_replay(path: Path, net: Net) -> Replay:
             f"'{schedule.mission}'), but this mission compiles to {digest}: export the "
             "schedule again from this mission (coral-check verify --timed)"
         )
+    _check_against(path, schedule, net)
     replay = Replay(path, schedule)
     replay.script()  # refuse an ambiguous schedule before anything runs
     return replay
+
+
+def _check_against(path: Path, schedule: TimedSchedule, net: Net) -> None:
+    """Each scheduled command names a command transition of ``net``, its command, one
+    of its mapped replies, and a (transition, occurrence) no other entry names: a file
+    edited by hand is refused here, naming the entry, not half-way through the run."""
+    replies: dict[str, set[str]] = {}
+    for reply in net.transitions:
+        if reply.kind is TransitionKind.REPLY and reply.reply_to is not None and reply.reply:
+            replies.setdefault(reply.reply_to, set()).add(reply.reply)
+    seen: set[tuple[str, int]] = set()
+    for i, cmd in enumerate(schedule.commands):
+        where = f"{path}: commands[{i}]"
+        tr = next((t for t in net.transitions if t.name == cmd.transition), None)
+        if tr is None or tr.kind is not TransitionKind.COMMAND or tr.command is None:
+            raise ReplayError(f"{where}.transition: {cmd.transition!r} sends no command here")
+        if tr.command.name != cmd.command:
+            raise ReplayError(
+                f"{where}.command: {cmd.transition} sends {tr.command.name}, not {cmd.command}"
+            )
+        if cmd.reply not in replies.get(tr.name, set()):
+            known = ", ".join(sorted(replies.get(tr.name, set()))) or "none"
+            raise ReplayError(
+                f"{where}.reply: {cmd.transition} takes no reply {cmd.reply!r} (it takes: {known})"
+            )
+        key = (cmd.transition, cmd.occurrence)
+        if key in seen:
+            raise ReplayError(
+                f"{where}.occurrence: {cmd.transition} #{cmd.occurrence} is listed twice"
+            )
+        seen.add(key)
 
 
 def _tolerance(replies: int) -> float:

@@ -164,10 +164,15 @@ class EventSemantics:
         engine = model.engine
         self._engine = engine
         consumers: dict[int, list[int]] = {}
+        producers: dict[int, list[int]] = {}
         for t in engine:
             for p, _ in self._inputs[t]:
                 consumers.setdefault(p, []).append(t)
+            for p, _ in self._outputs[t]:
+                producers.setdefault(p, []).append(t)
         self._consumers = consumers
+        self._producers = producers
+        self._prioritised = len({net.transitions[t].priority for t in engine}) > 1
         self._pending = {
             net.place_index(t.pending) for t in net.transitions if t.pending is not None
         }
@@ -222,6 +227,10 @@ class EventSemantics:
         for ref, command in self.model.commands.items():
             resources = {f"r:{r}" for r in command.resources}
             arrival = resources if (command.takes_resources or command.watched) else set()
+            if command.takes_resources:
+                # stopping a holder frees all its resources, and times out the queries
+                # on any of them: those are touched too
+                arrival = arrival | {f"r:{r}" for r in self._displaceable(command.resources)}
             out[(ref, UP)] = frozenset(arrival)
             out[(ref, WORK)] = frozenset(resources if command.takes_resources else ())
             out[(ref, WAIT)] = frozenset(resources)
@@ -234,6 +243,15 @@ class EventSemantics:
                     for q, _ in self._inputs[t]:
                         syncs.update(self._place_syncs.get(q, ()))
             out[(ref, DOWN)] = frozenset(syncs)
+        return out
+
+    def _displaceable(self, resources: tuple[str, ...]) -> set[str]:
+        """Every resource a command that takes ``resources`` can free by stopping the
+        holders of them (each holder's other resources included)."""
+        out = set(resources)
+        for other in self.model.commands.values():
+            if other.takes_resources and out.intersection(other.resources):
+                out.update(other.resources)
         return out
 
     def _future_footprints(self) -> dict[tuple[int, int], frozenset[str]]:
@@ -249,6 +267,7 @@ class EventSemantics:
                 return frozenset()
             command = self.model.commands[ref]
             syncs = {f"r:{r}" for r in command.resources}
+            syncs.update(self._touches[(ref, UP)])
             syncs.update(self._touches[(ref, DOWN)])
             outputs = {p for _, reply in command.replies for p, _ in self._outputs[reply]}
             seen = set(outputs)
@@ -425,7 +444,7 @@ class EventSemantics:
             command = model.commands[act.ref]
             assert command.time_out is not None
             return b.constrain(t, act.a, command.time_out) and b.constrain(
-                t, act.b, command.interval("done")[1]
+                t, act.b, command.interval(command.tracked)[1]
             )
         latency = model.commands[act.ref].latency
         return b.constrain(t, act.a, model.link_high + latency)
@@ -449,7 +468,7 @@ class EventSemantics:
         if command.watched:
             out.extend(self._watch(b, index, t))
         for kind, _, _ in command.work:
-            if command.watched and kind == "done":
+            if command.watched and kind == command.tracked:
                 continue
             branch = b.copy()
             branch.acts[index] = Act(WORK, act.ref, kind, t, -1, (), act.origin)
@@ -470,13 +489,13 @@ class EventSemantics:
             var, task = next(iter(owners))
             if task:
                 start = var
-        low, high = command.interval("done")
+        low, high = command.interval(command.tracked)
         out: list[tuple[str, _Builder]] = []
         tracked = base.copy()
         if tracked.constrain(start, t, -low):
             tracked.record("done", act.ref, "done", t, act.origin, 0)
-            tracked.acts[index] = Act(DOWN, act.ref, "done", t, -1, (), act.origin)
-            tracked.record("due", act.ref, "done", t, act.origin)
+            tracked.acts[index] = Act(DOWN, act.ref, command.tracked, t, -1, (), act.origin)
+            tracked.record("due", act.ref, command.tracked, t, act.origin)
             out.append((" tracked", tracked))
         waiting = base.copy()
         if waiting.constrain(t, start, high - 1):
@@ -486,6 +505,9 @@ class EventSemantics:
 
     def _displace(self, b: _Builder, resources: tuple[str, ...], t: int, skip: int) -> bool:
         stopped = {h.var for h in b.holders if h.resource in resources}
+        # Every resource of a stopped command: a query watching any of them times out
+        # (as the vehicle does), whichever command it found holding them on arrival.
+        released = {h.resource for h in b.holders if h.var in stopped}
         if not stopped:
             return True
         b.holders = [h for h in b.holders if h.var not in stopped]
@@ -499,7 +521,9 @@ class EventSemantics:
                         return False
                     b.acts[i] = Act(DOWN, act.ref, "error", t, -1, (), act.origin)
                     b.record("due", act.ref, "error", t, act.origin)
-            elif act.phase == WAIT and stopped.intersection(act.watch):
+            elif act.phase == WAIT and released.intersection(
+                self.model.commands[act.ref].resources
+            ):
                 if not self._before_deadline(b, act, t):
                     return False
                 b.acts[i] = Act(DOWN, act.ref, "timeout", t, -1, (), act.origin)
@@ -526,7 +550,7 @@ class EventSemantics:
         act = b.acts[index]
         command = self.model.commands[act.ref]
         assert command.time_out is not None
-        low, high = command.interval("done")
+        low, high = command.interval(command.tracked)
         t = b.fresh()
         if not (
             self._within(b, t, act.b, low, high) and self._within(b, t, act.a, 0, command.time_out)
@@ -537,15 +561,15 @@ class EventSemantics:
         assert b.zone is not None
         waited = b.zone.bound(t, act.a)
         b.record("done", act.ref, "done", t, act.origin, waited)
-        b.acts[index] = Act(DOWN, act.ref, "done", t, -1, (), act.origin)
-        b.record("due", act.ref, "done", t, act.origin)
+        b.acts[index] = Act(DOWN, act.ref, command.tracked, t, -1, (), act.origin)
+        b.record("due", act.ref, command.tracked, t, act.origin)
         return [("", b)]
 
     def _timeout(self, b: _Builder, index: int) -> list[tuple[str, _Builder]]:
         act = b.acts[index]
         command = self.model.commands[act.ref]
         assert command.time_out is not None
-        high = command.interval("done")[1]
+        high = command.interval(command.tracked)[1]
         t = b.fresh()
         if not (
             self._within(b, t, act.a, command.time_out, command.time_out)
@@ -647,20 +671,28 @@ class EventSemantics:
         return out
 
     def _choose(self, b: _Builder, enabled: list[int]) -> list[int]:
-        """The enabled transitions to fire next: all of a conflict (they race), else
-        the first alone (firing independent ones in any order gives the same)."""
-        first = enabled[0]
-        rivals = [
-            t
-            for t in enabled
-            if t == first
-            or any(p in {q for q, _ in self._inputs[first]} for p, _ in self._inputs[t])
-        ]
-        if len(rivals) == 1:
-            return rivals
-        priorities = {self.model.net.transitions[t].priority for t in rivals}
-        top = max(priorities)
-        return [t for t in rivals if self.model.net.transitions[t].priority == top]
+        """The enabled transitions to branch on next, as the global-clock semantics
+        chooses them: with priorities, every enabled one of the highest; else those of
+        a stubborn set seeded with the first (a transition that takes a token, or one
+        that is not yet enabled but could take it once another fires, races with it)."""
+        transitions = self.model.net.transitions
+        if self._prioritised:
+            top = max(transitions[t].priority for t in enabled)
+            return [t for t in enabled if transitions[t].priority == top]
+        members = {enabled[0]}
+        todo = [enabled[0]]
+        while todo:
+            t = todo.pop()
+            missing = [p for p, _ in self._inputs[t] if p not in b.tokens]
+            if not missing:
+                added = [u for p, _ in self._inputs[t] for u in self._consumers.get(p, ())]
+            else:
+                added = list(self._producers.get(missing[0], ()))
+            for u in added:
+                if u not in members:
+                    members.add(u)
+                    todo.append(u)
+        return [t for t in enabled if t in members]
 
     def _check_deadlines(self, b: _Builder) -> list[tuple[str, _Builder]]:
         """Deadlines whose places are all marked in this resting marking: settled, in

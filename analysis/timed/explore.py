@@ -601,10 +601,16 @@ def _timeout_detail(name: str, command: str, time_out: float, schedule: TimedSch
     )
     if sent is None:
         return f"{name} ({command}) can time out"
+    if sent.work_s < time_out - 1e-6:
+        why = (
+            f"after {sent.work_s:.3f} s a command on its resources stopped the task it "
+            "watched, which times it out at once"
+        )
+    else:
+        why = f"its {time_out:g} s time-out passed before the task it watches was done"
     return (
         f"{name} ({command}) can time out: sent at {sent.sent_at:.3f} s, it reached the "
-        f"vehicle after {sent.up_delay_s:.3f} s and its {time_out:g} s time-out passed "
-        "before the task it watches was done"
+        f"vehicle after {sent.up_delay_s:.3f} s, and {why}"
     )
 
 

@@ -14,6 +14,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from coral_lang import units
 from coral_lang.net import AssertKind, Net, TransitionKind
 from coral_lang.profile import TIME_OUT, CommandKind, VehicleProfile
 from coral_lang.timing import LinkBounds
@@ -62,8 +63,11 @@ class CommandModel:
         replies: reply kind -> index of the net's REPLY transition for it.
         work: reply kind -> [min, max] work time, us (not for a watched query's
             ``timeout``: its time is the time-out).
-        time_out: a watched query's time-out, us; None for every other command.
+        time_out: a watched query's time-out, us (converted from its parameter's
+            unit); None for every other command.
         latency: longest delay between a reply falling due and its sending, us.
+        tracked: a watched query's reply when its tracking completes: ``done``, or its
+            first reply kind when it has no ``done`` (as the vehicles do).
     """
 
     transition: int
@@ -75,6 +79,7 @@ class CommandModel:
     work: tuple[tuple[str, int, int], ...]
     time_out: int | None
     latency: int
+    tracked: str = "done"
 
     @property
     def watched(self) -> bool:
@@ -182,7 +187,14 @@ def build_model(net: Net, profiles: Sequence[VehicleProfile], link: LinkBounds) 
             and isinstance(raw_time_out, int | float)
             and "timeout" in spec.replies
         )
-        time_out = round(float(raw_time_out) * US) if watched and raw_time_out is not None else None
+        time_out = None
+        if watched and isinstance(raw_time_out, int | float):
+            unit = spec.param(TIME_OUT)
+            seconds = float(raw_time_out)
+            if unit is not None and unit.unit is not None:
+                seconds = units.convert(seconds, unit.unit, "s")
+            time_out = round(seconds * US)
+        tracked = "done" if "done" in spec.replies else spec.replies[0]
         tolerance = profile.timing.tolerance
         work = []
         for kind, _ in mapped:
@@ -200,6 +212,7 @@ def build_model(net: Net, profiles: Sequence[VehicleProfile], link: LinkBounds) 
             work=tuple(work),
             time_out=time_out,
             latency=_high(profile.timing.reply_latency_s),
+            tracked=tracked,
         )
     engine = tuple(
         i

@@ -336,7 +336,7 @@ class Semantics:
                 assert command.time_out is not None
                 out = out.constrain(NOW, act.a, command.time_out)
                 if out is not None:
-                    out = out.constrain(NOW, act.b, command.interval("done")[1])
+                    out = out.constrain(NOW, act.b, command.interval(command.tracked)[1])
             elif act.phase == DOWN:
                 latency = model.commands[act.ref].latency
                 out = out.constrain(NOW, act.a, model.link_high + latency)
@@ -407,12 +407,12 @@ class Semantics:
             )
         elif act.phase == WAIT:
             command = model.commands[act.ref]
-            low, high = command.interval("done")
+            low, high = command.interval(command.tracked)
             assert command.time_out is not None
             yield (
                 f"done {name}@{index}",
                 zone.constrain(act.b, NOW, -low),
-                lambda b: self._due(b, index, "done"),
+                lambda b: self._due(b, index, command.tracked),
             )
             timed_out = zone.constrain(act.a, NOW, -command.time_out)
             if timed_out is not None:
@@ -443,7 +443,7 @@ class Semantics:
             self._displace(b, command.resources)
         out: list[tuple[str, _Builder]] = []
         base = b
-        kinds = [k for k, _, _ in command.work if not (command.watched and k == "done")]
+        kinds = [k for k, _, _ in command.work if not (command.watched and k == command.tracked)]
         if command.watched:
             out.extend(self._watch(base, index, arrival))
         for kind in kinds:
@@ -473,14 +473,14 @@ class Semantics:
             var, task = next(iter(owners))
             if task:
                 start = var
-        low, high = command.interval("done")
+        low, high = command.interval(command.tracked)
         out: list[tuple[str, _Builder]] = []
         tracked = base.zone.constrain(start, NOW, -low)
         if tracked is not None:
             branch = base.copy()
             branch.zone = tracked
             branch.acts[index] = Act(WAIT, act.ref, "", arrival, start, watch, act.origin)
-            out.extend((" tracked", done) for _, done in self._due(branch, index, "done"))
+            out.extend((" tracked", done) for _, done in self._due(branch, index, command.tracked))
         waiting = base.zone.constrain(NOW, start, high - 1)
         if waiting is not None:
             branch = base.copy()
@@ -492,6 +492,9 @@ class Semantics:
     def _displace(self, b: _Builder, resources: tuple[str, ...]) -> None:
         """Stop every command holding one of ``resources`` (rule 3)."""
         stopped = {h.var for h in b.holders if h.resource in resources}
+        # Every resource of a stopped command: a query watching any of them times out
+        # (as the vehicle does), whichever command it found holding them on arrival.
+        released = {h.resource for h in b.holders if h.var in stopped}
         if not stopped:
             return
         b.holders = [h for h in b.holders if h.var not in stopped]
@@ -501,7 +504,9 @@ class Semantics:
                 if command.reply_transition("error") is not None:
                     b.acts[i] = Act(DOWN, act.ref, "error", b.stamp(), -1, (), act.origin)
                     b.record("due", act.ref, "error", origin=act.origin)
-            elif act.phase == WAIT and stopped.intersection(act.watch):
+            elif act.phase == WAIT and released.intersection(
+                self.model.commands[act.ref].resources
+            ):
                 b.acts[i] = Act(DOWN, act.ref, "timeout", b.stamp(), -1, (), act.origin)
                 b.record("due", act.ref, "timeout", origin=act.origin)
                 b.record("timeout", act.ref, "timeout", origin=act.origin)
@@ -509,7 +514,7 @@ class Semantics:
     def _due(self, b: _Builder, index: int, kind: str) -> list[tuple[str, _Builder]]:
         act = b.acts[index]
         command = self.model.commands[act.ref]
-        if kind == "done" and act.phase == WAIT:
+        if act.phase == WAIT and kind != "timeout":
             b.record("done", act.ref, "done", origin=act.origin, value=self._waited(b, act))
         due = b.stamp()
         b.acts[index] = Act(DOWN, act.ref, kind, due, -1, (), act.origin)

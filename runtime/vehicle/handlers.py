@@ -604,19 +604,33 @@ class HandlerVehicle:
             self._stop_holder(holder, f"replaced by {newcomer.job.name}")
 
     def _stop_holder(self, holder: _Running, why: str) -> None:
-        """End a task or action that holds resources, and the queries watching them."""
+        """End a task or action that holds resources, and the queries watching them.
+
+        Each gets one last poll first, as at a time-out: an answer that fell due since
+        the last poll was already given (timed analysis counts on it), so the stop must
+        not turn it into ``error`` or ``timeout``."""
+        watched = set(holder.holds)
+        queries = [
+            r
+            for r in self._running
+            if r.kind == "query" and watched.intersection(r.job.spec.resources)
+        ]
+        for run in [holder, *queries]:
+            if run.polled and run in self._running:
+                self._answer(run, self._call(run.handlers.poll, run))
+        was_running = holder in self._running
         self._finish(holder)
         self._call_stop(holder)
         what = holder.kind
-        if what == "action" or (what == "task" and not holder.replied):
+        if was_running and (what == "action" or (what == "task" and not holder.replied)):
             self._emit(holder.job, "error", f"interrupted: {why}")
         self._note(f"{holder.job.name} stopped: {why}")
-        watched = set(holder.holds)
-        for query in [r for r in self._running if r.kind == "query"]:
-            if watched.intersection(query.job.spec.resources):
-                self._finish(query)
-                self._call_stop(query)
-                self._emit(query.job, "timeout", f"its {what} {holder.job.name} was {why}")
+        for query in queries:
+            if query not in self._running:
+                continue
+            self._finish(query)
+            self._call_stop(query)
+            self._emit(query.job, "timeout", f"its {what} {holder.job.name} was {why}")
 
     def _finish(self, run: _Running) -> None:
         """Forget ``run``: it no longer runs nor holds anything."""

@@ -228,6 +228,38 @@ def test_bad_schedules_are_refused_before_anything_runs(
     assert "--schedule replays" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("transition", "nowhere", "commands[1].transition: 'nowhere' sends no command here"),
+        ("command", "DIVE", "commands[1].command: check sends DEPTH?, not DIVE"),
+        ("reply", "maybe", "commands[1].reply: check takes no reply 'maybe'"),
+        ("occurrence", None, "commands[2].occurrence: check #1 is listed twice"),
+    ],
+)
+def test_a_schedule_edited_by_hand_is_refused_naming_the_entry(
+    tiny: tuple[Path, Net],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    field: str,
+    value: str | None,
+    message: str,
+) -> None:
+    mission, net = tiny
+    data = _tiny_done(net).to_json()
+    commands = data["commands"]
+    assert isinstance(commands, list)
+    if value is None:  # the same (transition, occurrence) twice
+        commands.append(dict(commands[1]))
+    else:
+        commands[1][field] = value
+    bad = tmp_path / "edited.json"
+    bad.write_text(json.dumps(data))
+    assert _replay(mission, bad, tmp_path / "run", "--profile", str(MINNOW)) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "run" / "controller.sqlite").exists()
+
+
 def _int(value: object) -> int:
     assert isinstance(value, int)
     return value

@@ -101,6 +101,19 @@ def test_a_task_replaced_before_its_ack_replies_error() -> None:
     assert [(r.command_id, r.kind, r.time) for r in vehicle.advance_to(3.0)] == [(2, "ack", 1.5)]
 
 
+def test_an_ack_due_before_a_displacement_is_not_turned_into_error() -> None:
+    # DIVE arrives at 0.05 s, its ack falls due at 1.05 s; SURFACE arrives at 1.08 s,
+    # before the next poll (1.1 s): the ack was due first, so it stands (timed analysis
+    # counts on that).
+    vehicle = exact()
+    vehicle.advance_to(0.05)
+    vehicle.command(1, "DIVE", {"z": 10.0})
+    replies = vehicle.advance_to(1.08)
+    replies += vehicle.command(2, "SURFACE", {}) + vehicle.advance_to(1.08)
+    assert (1, "ack") in [(r.command_id, r.kind) for r in replies]
+    assert (1, "error") not in [(r.command_id, r.kind) for r in replies]
+
+
 def test_the_ack_delay_lies_in_its_interval_and_uses_it() -> None:
     delays = []
     for seed in range(40):

@@ -267,9 +267,12 @@ def test_a_task_on_a_busy_resource_stops_the_holder_and_its_queries_time_out() -
     vehicle.command(4, "LINE_END?", {"time_out": 10.0})
     vehicle.advance_to(1.0)
     bot.calls.clear()
-    # SURFACE takes depth and horizontal: both tasks stop, before SURFACE starts.
+    # SURFACE takes depth and horizontal: both tasks stop, before SURFACE starts. A
+    # watching query with a poll handler gets one last look first (an answer due now
+    # wins over the stop, as at a time-out).
     assert vehicle.command(5, "SURFACE", {}) == [Reply(5, "SURFACE", "ack", 1.0)]
     assert bot.calls == [
+        "poll DEPTH? at 1",
         "stop DIVE at 1",
         "stop DEPTH? at 1",
         "stop LINE at 1",
