@@ -425,13 +425,43 @@ class EventSemantics:
             if last is not None and not b.constrain(last, t, 0):
                 return False
         for i, other in enumerate(b.acts):
-            if i == skip or not syncs & self._touches[(other.ref, other.phase)]:
+            if i == skip:
                 continue
-            if not self._before_deadline(b, other, t):
+            if syncs & self._touches[(other.ref, other.phase)] and not self._before_deadline(
+                b, other, t
+            ):
+                return False
+            if not self._before_later_touches(b, other, syncs, t):
                 return False
         for sync in syncs:
             b.syncs[sync] = t
         return True
+
+    def _before_later_touches(self, b: _Builder, act: Act, syncs: frozenset[str], t: int) -> bool:
+        """``t`` no later than the latest moment a later event of ``act``'s own command
+        (its work ending, its reply reaching the engine) that touches ``syncs`` can
+        come: that event comes after ``t`` in the order of those syncs, so a ``t``
+        past its latest moment is no run at all."""
+        model = self.model
+        command = model.commands[act.ref]
+        latency = command.latency
+        high = model.link_high
+        slowest = max([h for _, _, h in command.work] + [command.time_out or 0])
+        later_work = act.phase == UP and bool(
+            syncs & (self._touches[(act.ref, WORK)] | self._touches[(act.ref, WAIT)])
+        )
+        if later_work and not b.constrain(t, act.a, high + slowest):
+            return False
+        if act.phase == DOWN or not syncs & self._touches[(act.ref, DOWN)]:
+            return True
+        if act.phase == UP:
+            return b.constrain(t, act.a, 2 * high + slowest + latency)
+        if act.phase == WORK:
+            return b.constrain(t, act.a, command.interval(act.kind)[1] + high + latency)
+        assert command.time_out is not None
+        return b.constrain(t, act.a, command.time_out + high + latency) and b.constrain(
+            t, act.b, command.interval(command.tracked)[1] + high + latency
+        )
 
     def _before_deadline(self, b: _Builder, act: Act, t: int) -> bool:
         """``t`` no later than the latest moment ``act`` may still fire."""
