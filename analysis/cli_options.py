@@ -78,7 +78,7 @@ DEFAULTS: dict[str, Any] = {
     "timed": False,
     "link": DEFAULT_LINK,
     "timed_states": DEFAULT_TIMED_STATES,
-    "timed_method": "events",
+    "timed_method": "auto",
 }
 """Built-in defaults of the options a configuration file may set."""
 
@@ -399,10 +399,11 @@ def add_timed_options(parser: argparse.ArgumentParser, *, schedules: bool = Fals
     )
     group.add_argument(
         "--timed-method",
-        choices=["events", "clock"],
+        choices=["auto", "events", "clock"],
         help="the explorer: 'events' (event times and partial-order reduction: fast with "
-        "parallel branches) or 'clock' (one global clock: the reference, to cross-check); "
-        "both give the same answers (default events)",
+        "independent parallel branches), 'clock' (one global clock: the reference), or "
+        "'auto' (events when the commands fall into independent groups); all give the "
+        "same answers (default auto)",
     )
     if schedules:
         group.add_argument(

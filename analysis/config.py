@@ -225,8 +225,8 @@ def _link(raw: object, folder: Path) -> str:
 
 
 def _method(raw: object, _folder: Path) -> str:
-    if raw not in ("events", "clock"):
-        raise ValueError(f"expected 'events' or 'clock', got {_show(raw)}")
+    if raw not in ("auto", "events", "clock"):
+        raise ValueError(f"expected 'auto', 'events' or 'clock', got {_show(raw)}")
     return str(raw)
 
 

@@ -124,12 +124,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--link", default="genoa-lisbon", help="link profile (name or file)")
     parser.add_argument("--states", type=int, default=2_000_000, help="symbolic state budget")
-    parser.add_argument("--time-limit", type=float, default=120.0, help="seconds per analysis")
+    parser.add_argument("--time-limit", type=float, default=30.0, help="seconds per analysis")
     parser.add_argument(
         "--method",
-        choices=["events", "clock", "both"],
-        default="both",
-        help="event times (coral-check's default), one global clock, or both side by side",
+        choices=["auto", "events", "clock", "all"],
+        default="all",
+        help="auto (coral-check's default), event times, one global clock, or all three "
+        "side by side (default)",
     )
     args = parser.parse_args(argv)
     link = (
@@ -137,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.link in BUILTIN_PROFILES
         else load_link_profile(Path(args.link))
     ).analysis_bounds()
-    methods = ["events", "clock"] if args.method == "both" else [args.method]
+    methods = ["auto", "events", "clock"] if args.method == "all" else [args.method]
     print(
         f"timed analysis, link {link.name} ({link.min_delay_s:g} to {link.max_delay_s:g} s "
         f"one way), median of {args.repeat}"

@@ -296,6 +296,25 @@ class EventSemantics:
                 out[(ref, phase)] = everything
         return out
 
+    def groups(self) -> int:
+        """How many groups the commands fall into when commands whose footprints
+        meet are put together: with one, nothing is independent and event times only
+        add variables (the explorer then takes the global clock)."""
+        parent = {ref: ref for ref in self.model.commands}
+
+        def find(ref: int) -> int:
+            while parent[ref] != ref:
+                parent[ref] = parent[parent[ref]]
+                ref = parent[ref]
+            return ref
+
+        owner: dict[str, int] = {}
+        for ref in self.model.commands:
+            for sync in self._footprints[(ref, UP)]:
+                other = owner.setdefault(sync, ref)
+                parent[find(ref)] = find(other)
+        return len({find(ref) for ref in parent})
+
     # ------------------------------------------------------------------ states
 
     def marking_of(self, state: EventState) -> tuple[int, ...]:

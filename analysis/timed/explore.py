@@ -57,6 +57,11 @@ def analyse_timed(
             deadlines=(),
         )
     events = options.method == "events"
+    if options.method == "auto":
+        try:
+            events = EventSemantics(model).groups() > 1
+        except NotSafe:  # pragma: no cover - raised while exploring, not here
+            events = False
     try:
         search = _Search(model, options, started, events=events)
         search.run()

@@ -20,13 +20,14 @@ class TimedOptions:
         link: bounds on the one-way delay of every message (from a link profile).
         max_states: symbolic states explored before giving up (inconclusive).
         time_limit_s: seconds before giving up (inconclusive); None: no limit.
-        method: ``events`` (event times with partial-order reduction; falls back to
-            ``clock`` for a net whose places can hold two tokens) or ``clock`` (one
-            global clock, every interleaving: the reference, slower with parallel
-            branches).
+        method: ``auto`` (``events`` when the mission's commands fall into independent
+            groups, else ``clock``), ``events`` (event times with partial-order
+            reduction; falls back to ``clock`` for a net whose places can hold two
+            tokens) or ``clock`` (one global clock, every interleaving: the reference,
+            slow with parallel branches). All give the same answers.
     """
 
     link: LinkBounds
     max_states: int = DEFAULT_TIMED_STATES
     time_limit_s: float | None = 60.0
-    method: str = "events"
+    method: str = "auto"

@@ -1,7 +1,7 @@
 """The two timed explorers agree, and their witnesses are runs showing what they claim.
 
 ``method="clock"`` (one global clock, every interleaving) is the reference;
-``method="events"`` (event times, stubborn sets, zone merging) is the fast default.
+``method="events"`` (event times, stubborn sets, zone merging) is the fast one.
 They share the model's definition (`analysis.timed.model`) but nothing of the search,
 so on every drawn mission (`tests.analysis.timed.missions`) they must find the same
 bounds, verdicts and margins. Witnesses are checked independently of both
