@@ -30,6 +30,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from analysis.timed.base import SemanticsBase, watched_start
 from analysis.timed.model import TimedModel
 from analysis.timed.zones import NOW, START, Zone, ZoneLike
 from coral_lang.net import Transition
@@ -181,38 +182,13 @@ class _Builder:
         return clone
 
 
-class Semantics:
+class Semantics(SemanticsBase[State, Successor]):
     """Successor computation for one `TimedModel` (module docstring)."""
 
     def __init__(self, model: TimedModel, *, initial_zone: ZoneLike | None = None) -> None:
-        self.model = model
-        self.keep = initial_zone is not None
-        self.last_raw: tuple[ZoneLike, list[int]] | None = None
-        """The last successor's zone before projection, and which of its variables
-        the projected state keeps (in order): `raw_step` reads it."""
-        self.last_raw_by_label: dict[str, tuple[ZoneLike, list[int]] | None] = {}
+        super().__init__(model, initial_zone)
         self._state_now = NOW
-        self._initial_zone: ZoneLike = Zone.initial() if initial_zone is None else initial_zone
-        net = model.net
-        self.transitions: tuple[Transition, ...] = net.transitions
-        self._inputs = [
-            tuple((net.place_index(p), w) for p, w in t.inputs) for t in net.transitions
-        ]
-        self._outputs = [
-            tuple((net.place_index(p), w) for p, w in t.outputs) for t in net.transitions
-        ]
-        engine = model.engine
-        self._engine = engine
-        consumers: dict[int, list[int]] = {}
-        producers: dict[int, list[int]] = {}
-        for t in engine:
-            for p, _ in self._inputs[t]:
-                consumers.setdefault(p, []).append(t)
-            for p, _ in self._outputs[t]:
-                producers.setdefault(p, []).append(t)
-        self._consumers = consumers
-        self._producers = producers
-        self._prioritised = len({net.transitions[t].priority for t in engine}) > 1
+        self.transitions: tuple[Transition, ...] = model.net.transitions
 
     # ------------------------------------------------------------------ net firing
 
@@ -352,19 +328,6 @@ class Semantics:
         the predecessor's ``n`` variables (``now`` was kept aside before time passed)."""
         return [START, self._state_now, *range(2, n)]
 
-    def raw_step(self, state: State, label: str) -> tuple[Zone, list[int]] | None:
-        """The zone of the step ``label`` from ``state`` before projection (the
-        variables of ``state`` first, then the step's own) and the variables the
-        successor keeps, in its order; None if there is no such step. Used to carry a
-        point of a successor back to its predecessor (witness runs)."""
-        for successor in self.initial() if label.startswith("start") else self.successors(state):
-            raw = self.last_raw_by_label.get(label)
-            if successor.label == label and raw is not None:
-                zone, order = raw
-                assert isinstance(zone, Zone)
-                return zone, order
-        return None
-
     def successors(self, state: State) -> list[Successor]:
         """Every state one timed event (and the engine's reaction) leads to."""
         self.last_raw_by_label = {}
@@ -465,14 +428,7 @@ class Semantics:
         later (the query waits, and times out if the time-out passes first)."""
         act = base.acts[index]
         command = self.model.commands[act.ref]
-        held = {h.resource: h for h in base.holders}
-        watch = tuple(sorted({held[r].var for r in command.resources if r in held}))
-        owners = {(held[r].var, held[r].task) for r in command.resources if r in held}
-        start = arrival
-        if len(owners) == 1 and all(r in held for r in command.resources):
-            var, task = next(iter(owners))
-            if task:
-                start = var
+        watch, start = watched_start(base.holders, command.resources, arrival)
         low, high = command.interval(command.tracked)
         out: list[tuple[str, _Builder]] = []
         tracked = base.zone.constrain(start, NOW, -low)
