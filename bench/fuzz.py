@@ -67,6 +67,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--seed", type=int, default=0, help="first run seed (default 0)")
     parser.add_argument(
+        "--workers",
+        type=positive_int,
+        nargs="*",
+        default=[1, 2],
+        help="campaigns side by side with these numbers of local worker processes (default 1 2)",
+    )
+    parser.add_argument(
         "--engine-schedules",
         type=positive_int,
         default=2000,
@@ -80,19 +87,27 @@ def main(argv: list[str] | None = None) -> int:
         approval = check_certificate(net, path)
 
     options = FuzzOptions(runs=args.runs, seed=args.seed, link=load_link_profile(args.link))
-    cpu = time.process_time()
-    report = fuzz(net, approval, options)
-    cpu = time.process_time() - cpu
-    durations = [r.duration for r in report.runs]
     print(f"network level: pool mission over '{args.link}', engine policy random")
-    print(f"  runs                      {len(report.runs)}")
-    print(f"  wall seconds              {report.wall_seconds:.2f}")
-    print(f"  CPU seconds               {cpu:.2f}")
-    print(f"  schedules/s               {report.schedules_per_second:.2f}")
-    print(f"  median mission time       {statistics.median(durations):.1f} s (virtual)")
     print(
-        f"  reached a final marking   {len(report.runs) - len(report.failures)}/{len(report.runs)}"
+        f"  {'workers':>7} {'runs':>5} {'wall s':>8} {'CPU s (this process)':>21} "
+        f"{'schedules/s':>12} {'median mission s':>17} {'final':>7}  same runs as 1 worker"
     )
+    report = None
+    first = None
+    for workers in args.workers:
+        cpu = time.process_time()
+        report = fuzz(net, approval, options, workers=workers)
+        cpu = time.process_time() - cpu
+        durations = [r.duration for r in report.runs]
+        runs = [(r.seed, r.end, r.events_digest) for r in report.runs]
+        first = runs if first is None else first
+        reached = len(report.runs) - len(report.failures)
+        print(
+            f"  {workers:>7} {len(report.runs):>5} {report.wall_seconds:>8.2f} {cpu:>21.2f} "
+            f"{report.schedules_per_second:>12.2f} {statistics.median(durations):>17.1f} "
+            f"{reached:>3}/{len(report.runs):<3}  {'yes' if runs == first else 'NO'}"
+        )
+    assert report is not None
 
     rng = random.Random(args.seed)
     timing = Timing(net)

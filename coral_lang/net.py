@@ -293,6 +293,24 @@ class Net:
         object.__setattr__(self, "_place_index", MappingProxyType(place_index))
         object.__setattr__(self, "_transition_index", MappingProxyType(transition_index))
 
+    def __reduce__(self) -> tuple[type[Net], tuple[object, ...]]:
+        """Pickle the declared fields only; the indices are rebuilt on loading (they
+        are read-only views, which do not pickle). Fuzz runs in worker processes need
+        the net."""
+        return (
+            Net,
+            (
+                self.name,
+                self.places,
+                self.transitions,
+                self.finals,
+                self.assertions,
+                self.vehicle,
+                self.sources,
+                self.requirements,
+            ),
+        )
+
     # -- lookup -------------------------------------------------------------------------
 
     def place(self, name: str) -> Place:

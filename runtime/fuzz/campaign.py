@@ -10,10 +10,12 @@ runs, whether analysis predicts their dead marking.
 from __future__ import annotations
 
 import math
+import multiprocessing
 import statistics
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -271,26 +273,34 @@ def fuzz(
     mission_path: str = "",
     failed_logs: Path | None = None,
     progress: Progress | None = None,
+    workers: int = 1,
 ) -> FuzzReport:
     """Run ``options.runs`` runs of ``net``; Ctrl-C stops early with the runs so far.
 
     Args:
         failed_logs: keep the controller log of each failed run in this folder.
         progress: told after every run.
+        workers: local processes to run them in (1: in this process). A run depends on
+            its run seed alone, so the report lists the same runs in the same order
+            whatever the number of workers; only wall times differ.
     """
     started = time.perf_counter()
     runs: list[FuzzRun] = []
     interrupted = False
     try:
-        for index in range(options.runs):
-            seed = run_seed(options.seed, index)
-            runs.append(
-                run_one(net, approval, seed, options, index=index, keep_failed_logs=failed_logs)
-            )
-            if progress is not None:
-                progress(index + 1, options.runs, sum(not r.ok for r in runs))
+        if workers <= 1 or options.runs <= 1:
+            for index in range(options.runs):
+                seed = run_seed(options.seed, index)
+                runs.append(
+                    run_one(net, approval, seed, options, index=index, keep_failed_logs=failed_logs)
+                )
+                if progress is not None:
+                    progress(index + 1, options.runs, sum(not r.ok for r in runs))
+        else:
+            _in_workers(net, approval, options, failed_logs, progress, workers, runs)
     except KeyboardInterrupt:
         interrupted = True
+    runs.sort(key=lambda r: r.index)
     report = FuzzReport(
         mission=net.name,
         mission_path=mission_path,
@@ -303,6 +313,41 @@ def fuzz(
     if any(r.end is RunEnd.DEADLOCK for r in runs):
         report.predicted_deadlocks = predicted_deadlocks(net)
     return report
+
+
+def _in_workers(
+    net: Net,
+    approval: CertificateCheck,
+    options: FuzzOptions,
+    failed_logs: Path | None,
+    progress: Progress | None,
+    workers: int,
+    runs: list[FuzzRun],
+) -> None:
+    """The runs in ``workers`` fresh processes (spawned: nothing of this process's
+    state, its event loop or its open logs, is inherited), appended to ``runs`` as they
+    finish. On Ctrl-C the runs not started are cancelled and those done are kept."""
+    context = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(max_workers=min(workers, options.runs), mp_context=context)
+    try:
+        pending = [
+            pool.submit(
+                run_one,
+                net,
+                approval,
+                run_seed(options.seed, index),
+                options,
+                index=index,
+                keep_failed_logs=failed_logs,
+            )
+            for index in range(options.runs)
+        ]
+        for done in as_completed(pending):
+            runs.append(done.result())
+            if progress is not None:
+                progress(len(runs), options.runs, sum(not r.ok for r in runs))
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def predicted_deadlocks(

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shlex
 import sys
 from collections.abc import Sequence
@@ -147,6 +148,7 @@ def _fuzz(options: argparse.Namespace, err: IO[str]) -> int:
             mission_path=str(mission),
             failed_logs=out / FAILURES_DIR,
             progress=bar,
+            workers=options.workers or os.cpu_count() or 1,
         )
     finally:
         bar.close()

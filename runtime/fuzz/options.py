@@ -133,6 +133,14 @@ def add_fuzz_arguments(parser: argparse.ArgumentParser) -> None:
         default=Path("out/fuzz"),
         help="report, histogram and failed runs' logs go here (default out/fuzz)",
     )
+    parser.add_argument(
+        "--workers",
+        type=positive_int,
+        default=None,
+        metavar="N",
+        help="run the campaign in N local processes (default: one per core); the "
+        "report is the same whatever N",
+    )
     parser.add_argument("--no-plot", action="store_true", help="do not draw the histogram")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     add_simulation_arguments(parser, config_aliases=("--vehicle-config",))

@@ -41,6 +41,24 @@ def test_the_report_counts_endings_and_names_the_worst_runs() -> None:
     assert stats["median"] <= stats["p90"] <= stats["max"]
 
 
+def test_worker_processes_give_the_same_report_as_one_process() -> None:
+    # A run depends on its seed alone: two spawned workers must give the very runs one
+    # process gives, in the same order (only wall times differ).
+    pool = mission("pool")
+    options = FuzzOptions(runs=6, seed=40, link=BUILTIN_PROFILES["genoa-lisbon"])
+    serial = fuzz(pool.net, pool.approval, options)
+    parallel = fuzz(pool.net, pool.approval, options, workers=2)
+
+    def key(report: FuzzReport) -> list[tuple[object, ...]]:
+        return [
+            (r.index, r.seed, r.end, r.marking, r.duration, r.events_digest, dict(r.fired))
+            for r in report.runs
+        ]
+
+    assert key(parallel) == key(serial)
+    assert [r.seed for r in parallel.runs] == list(range(40, 46))
+
+
 def test_the_report_flags_a_dead_marking_analysis_did_not_predict() -> None:
     """Never expected; the report must say so loudly if the runtime ever disagreed."""
     racy = mission("racy")
