@@ -7,6 +7,7 @@ successor's zone back to its predecessor (`SemanticsBase.raw_step`).
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from typing import Generic, Protocol, TypeVar
 
@@ -50,7 +51,7 @@ S = TypeVar("S")
 T = TypeVar("T", bound=_Labelled)
 
 
-class SemanticsBase(Generic[S, T]):
+class SemanticsBase(ABC, Generic[S, T]):
     """The net's arcs by index (``_inputs``, ``_outputs``: per transition, (place,
     weight) pairs; ``_consumers``, ``_producers``: per place, the engine transitions
     taking from or putting into it) and the zone every run starts from.
@@ -87,13 +88,13 @@ class SemanticsBase(Generic[S, T]):
         self._producers = producers
         self._prioritised = len({net.transitions[t].priority for t in self._engine}) > 1
 
+    @abstractmethod
     def initial(self) -> Sequence[T]:
         """The states the mission can rest in at time 0."""
-        raise NotImplementedError
 
+    @abstractmethod
     def successors(self, state: S) -> Sequence[T]:
         """The successors of ``state``."""
-        raise NotImplementedError
 
     def raw_step(self, state: S, label: str) -> tuple[Zone, list[int]] | None:
         """The zone of the step ``label`` from ``state`` before projection (the

@@ -38,7 +38,17 @@ from typing import NamedTuple
 
 from analysis.timed.base import SemanticsBase, watched_start
 from analysis.timed.model import TimedModel
-from analysis.timed.semantics import DOWN, UP, WAIT, WORK, EngineSpin, Holder, Record
+from analysis.timed.semantics import (
+    DOWN,
+    UP,
+    WAIT,
+    WORK,
+    Act,
+    EngineSpin,
+    Holder,
+    Record,
+    Renumbering,
+)
 from analysis.timed.zones import INF, START, Zone, ZoneLike
 
 __all__ = ["EventSemantics", "EventState", "NotSafe"]
@@ -46,18 +56,6 @@ __all__ = ["EventSemantics", "EventState", "NotSafe"]
 
 class NotSafe(Exception):
     """A place would hold two tokens: this semantics does not apply."""
-
-
-class Act(NamedTuple):
-    """A running timer (as `analysis.timed.semantics.Act`, no deadlines)."""
-
-    phase: int
-    ref: int
-    kind: str
-    a: int
-    b: int
-    watch: tuple[int, ...]
-    origin: int
 
 
 @dataclass(frozen=True)
@@ -464,16 +462,32 @@ class EventSemantics(SemanticsBase[EventState, Successor]):
         return b.constrain(t, act.a, model.link_high + latency)
 
     def _within(self, b: _Builder, t: int, start: int, low: int, high: int) -> bool:
-        return b.constrain(start, t, -low) and (high >= INF or b.constrain(t, start, high))
+        """``low <= t - start <= high`` (either end may be unbounded, +-`INF`)."""
+        return (low <= -INF or b.constrain(start, t, -low)) and (
+            high >= INF or b.constrain(t, start, high)
+        )
+
+    def _place(
+        self, b: _Builder, index: int, windows: list[tuple[int, int, int]], *, touch: bool = True
+    ) -> int | None:
+        """The time variable of timer ``index``'s next event: ``low <= t - start <=
+        high`` for each ``(start, low, high)`` of ``windows`` and, with ``touch``, at its
+        place in the order of the syncs its phase touches (`_touch`). None if no such
+        time exists."""
+        act = b.acts[index]
+        t = b.fresh()
+        if not all(self._within(b, t, start, low, high) for start, low, high in windows):
+            return None
+        if touch and not self._touch(b, self._touches[(act.ref, act.phase)], t, index):
+            return None
+        return t
 
     def _arrive(self, b: _Builder, index: int) -> list[tuple[str, _Builder]]:
         act = b.acts[index]
         model = self.model
         command = model.commands[act.ref]
-        t = b.fresh()
-        if not self._within(b, t, act.a, model.link_low, model.link_high):
-            return []
-        if not self._touch(b, self._touches[(act.ref, UP)], t, index):
+        t = self._place(b, index, [(act.a, model.link_low, model.link_high)])
+        if t is None:
             return []
         b.record("arrive", act.ref, "", t, act.origin)
         if command.takes_resources and not self._displace(b, command.resources, t, index):
@@ -542,10 +556,8 @@ class EventSemantics(SemanticsBase[EventState, Successor]):
         act = b.acts[index]
         command = self.model.commands[act.ref]
         low, high = command.interval(act.kind)
-        t = b.fresh()
-        if not self._within(b, t, act.a, low, high):
-            return []
-        if not self._touch(b, self._touches[(act.ref, WORK)], t, index):
+        t = self._place(b, index, [(act.a, low, high)])
+        if t is None:
             return []
         if command.kind == "action" or act.kind == "error":  # it lets its resources go
             b.holders = [h for h in b.holders if h.var != act.a]
@@ -558,12 +570,8 @@ class EventSemantics(SemanticsBase[EventState, Successor]):
         command = self.model.commands[act.ref]
         assert command.time_out is not None
         low, high = command.interval(command.tracked)
-        t = b.fresh()
-        if not (
-            self._within(b, t, act.b, low, high) and self._within(b, t, act.a, 0, command.time_out)
-        ):
-            return []
-        if not self._touch(b, self._touches[(act.ref, WAIT)], t, index):
+        t = self._place(b, index, [(act.b, low, high), (act.a, 0, command.time_out)])
+        if t is None:
             return []
         assert b.zone is not None
         waited = b.zone.bound(t, act.a)
@@ -577,13 +585,10 @@ class EventSemantics(SemanticsBase[EventState, Successor]):
         command = self.model.commands[act.ref]
         assert command.time_out is not None
         high = command.interval(command.tracked)[1]
-        t = b.fresh()
-        if not (
-            self._within(b, t, act.a, command.time_out, command.time_out)
-            and b.constrain(t, act.b, high - 1)
-        ):
-            return []
-        if not self._touch(b, self._touches[(act.ref, WAIT)], t, index):
+        # at the time-out, the tracking not yet complete (done wins a tie)
+        windows = [(act.a, command.time_out, command.time_out), (act.b, -INF, high - 1)]
+        t = self._place(b, index, windows)
+        if t is None:
             return []
         b.acts[index] = Act(DOWN, act.ref, "timeout", t, -1, (), act.origin)
         b.record("due", act.ref, "timeout", t, act.origin)
@@ -591,13 +596,15 @@ class EventSemantics(SemanticsBase[EventState, Successor]):
         return [("", b)]
 
     def _reply(self, b: _Builder, index: int) -> list[tuple[str, _Builder]]:
-        act = b.acts.pop(index)
+        act = b.acts[index]
         model = self.model
         command = model.commands[act.ref]
-        latency = command.latency
-        t = b.fresh()
-        if not self._within(b, t, act.a, model.link_low, model.link_high + latency):
+        window = (act.a, model.link_low, model.link_high + command.latency)
+        # the syncs it touches are its reply's output places', touched as they fill
+        t = self._place(b, index, [window], touch=False)
+        if t is None:
             return []
+        b.acts.pop(index)
         reply = command.reply_transition(act.kind)
         assert reply is not None
         if not self._produce(b, reply, t, -1):
@@ -748,41 +755,20 @@ class EventSemantics(SemanticsBase[EventState, Successor]):
         if self.keep or not isinstance(b.zone, Zone):
             return EventState(
                 tuple(tokens),
-                tuple(Act(*a) for a in acts),
+                tuple(acts),
                 tuple(holders),
                 tuple(syncs),
                 tuple(b.sinks),
                 frozenset(b.settled),
                 b.zone,
             )
-        order = [START]
-        index = {START: 0}
-        self.last_raw = (b.zone, order)
-
-        def use(var: int) -> int:
-            if var < 0:
-                return -1
-            if var not in index:
-                index[var] = len(order)
-                order.append(var)
-            return index[var]
-
-        new_tokens = tuple((p, use(v)) for p, v in tokens)
-        new_acts = tuple(
-            Act(
-                a.phase,
-                a.ref,
-                a.kind,
-                use(a.a),
-                use(a.b),
-                tuple(sorted(use(v) for v in a.watch)),
-                -1,
-            )
-            for a in acts
-        )
-        new_holders = tuple(Holder(h.resource, h.ref, use(h.var), h.task) for h in holders)
-        new_syncs = tuple((s, use(v)) for s, v in syncs)
-        new_sinks = tuple(sorted(use(v) for v in b.sinks))
+        renumber = Renumbering([START])
+        self.last_raw = (b.zone, renumber.order)
+        new_tokens = tuple((p, renumber.use(v)) for p, v in tokens)
+        new_acts = tuple(renumber.act(a) for a in acts)
+        new_holders = tuple(renumber.holder(h) for h in holders)
+        new_syncs = tuple((s, renumber.use(v)) for s, v in syncs)
+        new_sinks = tuple(sorted(renumber.use(v) for v in b.sinks))
         return EventState(
             new_tokens,
             new_acts,
@@ -790,5 +776,5 @@ class EventSemantics(SemanticsBase[EventState, Successor]):
             new_syncs,
             new_sinks,
             frozenset(b.settled),
-            b.zone.keep(order),
+            b.zone.keep(renumber.order),
         )

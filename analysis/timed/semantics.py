@@ -129,6 +129,33 @@ class State:
         return all(act.phase == DEADLINE for act in self.acts)
 
 
+class Renumbering:
+    """Variables renumbered in order of first use, from the fixed ones: how a state
+    keeps only what its timers need, so that equal situations meet (both explorers)."""
+
+    def __init__(self, fixed: list[int]) -> None:
+        self.order = list(fixed)
+        self._index = {var: i for i, var in enumerate(fixed)}
+
+    def use(self, var: int) -> int:
+        """The new number of ``var`` (-1 stays -1: no variable)."""
+        if var < 0:
+            return -1
+        if var not in self._index:
+            self._index[var] = len(self.order)
+            self.order.append(var)
+        return self._index[var]
+
+    def act(self, a: Act) -> Act:
+        """``a`` over the new numbers (its send moment dropped: witness replays only)."""
+        watch = tuple(sorted(self.use(v) for v in a.watch))
+        return Act(a.phase, a.ref, a.kind, self.use(a.a), self.use(a.b), watch, -1)
+
+    def holder(self, h: Holder) -> Holder:
+        """``h`` over the new numbers."""
+        return Holder(h.resource, h.ref, self.use(h.var), h.task)
+
+
 class Successor(NamedTuple):
     """One successor: a label naming the choice (equal in both modes), the state,
     and what happened."""
@@ -541,37 +568,16 @@ class Semantics(SemanticsBase[State, Successor]):
         holders = sorted(b.holders, key=lambda h: (h.resource, h.ref))
         if self.keep or not isinstance(b.zone, Zone):
             return State(b.marking, tuple(acts), tuple(holders), frozenset(b.settled), b.zone)
-        order = [START, NOW]
-        index = {START: 0, NOW: 1}
-        self.last_raw = (b.zone, order)
-
-        def use(var: int) -> int:
-            if var < 0:
-                return -1
-            if var not in index:
-                index[var] = len(order)
-                order.append(var)
-            return index[var]
-
-        renamed_acts = tuple(
-            Act(
-                a.phase,
-                a.ref,
-                a.kind,
-                use(a.a),
-                use(a.b),
-                tuple(sorted(use(v) for v in a.watch)),
-                -1,
-            )
-            for a in acts
-        )
-        renamed_holders = tuple(Holder(h.resource, h.ref, use(h.var), h.task) for h in holders)
+        renumber = Renumbering([START, NOW])
+        self.last_raw = (b.zone, renumber.order)
+        renamed_acts = tuple(renumber.act(a) for a in acts)
+        renamed_holders = tuple(renumber.holder(h) for h in holders)
         return State(
             b.marking,
             renamed_acts,
             renamed_holders,
             frozenset(b.settled),
-            b.zone.keep(order),
+            b.zone.keep(renumber.order),
         )
 
 
