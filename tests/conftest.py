@@ -100,15 +100,27 @@ def signing_key() -> TestKey:
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
 
-@pytest.fixture(scope="session")
-def chromium() -> str:
-    """The headless browser for the HTML report and watch page tests (``.ci/run``
-    installs it): skipped on a developer's machine without it, a failure under CI."""
-    for name in BROWSERS:
+def required_program(names: tuple[str, ...], install: str) -> str:
+    """The first of ``names`` on the PATH, for a test that needs an outside program
+    (``.ci/run`` installs each): skipped on a developer's machine without it, a failure
+    under CI, where a missing program must not hide a test."""
+    for name in names:
         found = shutil.which(name)
         if found:
             return found
-    message = "Chromium is not installed (apt-get install chromium)"
+    message = f"{names[0]} is not installed ({install})"
     if os.environ.get("CI"):
-        pytest.fail(f"{message}; CI must run the browser tests")
+        pytest.fail(f"{message}; CI must run the tests that need it")
     pytest.skip(message)
+
+
+@pytest.fixture(scope="session")
+def chromium() -> str:
+    """The headless browser for the HTML report and watch page tests."""
+    return required_program(BROWSERS, "apt-get install chromium")
+
+
+@pytest.fixture(scope="session")
+def patch_program() -> str:
+    """``patch``, which must apply what ``coral-check fmt --diff`` prints."""
+    return required_program(("patch",), "apt-get install patch")

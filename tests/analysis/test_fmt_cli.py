@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import os
 import stat
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -212,15 +213,10 @@ def test_diff_without_a_final_newline_is_a_proper_unified_diff(
     assert path.read_text() == text
 
 
-def test_the_diff_applies_with_patch_when_it_is_installed(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+def test_the_diff_applies_with_patch(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], patch_program: str
 ) -> None:
-    import shutil
-    import subprocess
-
-    patch = shutil.which("patch")
-    if patch is None:
-        pytest.skip("no patch program")
+    patch = patch_program
     path = tmp_path / "m.coral"
     path.write_text(MESSY.rstrip("\n"))
     assert main(["fmt", "--diff", str(path)]) == 1
@@ -257,14 +253,9 @@ def test_the_diff_of_comments_with_odd_line_breaks_applies(
 
 
 def test_the_diff_of_odd_line_breaks_applies_with_patch(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], patch_program: str
 ) -> None:
-    import shutil
-    import subprocess
-
-    patch = shutil.which("patch")
-    if patch is None:
-        pytest.skip("no patch program")
+    patch = patch_program
     path = tmp_path / "m.coral"
     diff = tmp_path / "m.diff"
     diff.write_text(_fmt_diff(path, ODD_BREAKS, capsys), encoding="utf-8", newline="")
