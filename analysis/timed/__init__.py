@@ -15,7 +15,9 @@ and what it abstracts: ``docs/analysis-methods.md`` (timed analysis).
 
 from __future__ import annotations
 
-from analysis.timed.explore import analyse_timed
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 from analysis.timed.options import TimedOptions
 from analysis.timed.results import DeadlineResult, FinalTiming, QueryAdequacy, TimedReport
 from analysis.timed.schedule import (
@@ -25,6 +27,10 @@ from analysis.timed.schedule import (
     TimedSchedule,
     read_schedule,
 )
+
+if TYPE_CHECKING:
+    from coral_lang.net import Net
+    from coral_lang.profile import VehicleProfile
 
 __all__ = [
     "DeadlineResult",
@@ -39,3 +45,16 @@ __all__ = [
     "analyse_timed",
     "read_schedule",
 ]
+
+
+def analyse_timed(
+    net: Net, profiles: Sequence[VehicleProfile], options: TimedOptions
+) -> TimedReport:
+    """Timed analysis of ``net`` (`analysis.timed.explore.analyse_timed`).
+
+    The explorers are imported on the first call: every ``coral-check`` run loads this
+    package (for its options and results), and only ``--timed`` needs them.
+    """
+    from analysis.timed.explore import analyse_timed as explore
+
+    return explore(net, profiles, options)

@@ -85,7 +85,6 @@ class _Node:
     label: str
     alternatives: list[tuple[int, str, Zone]] = field(default_factory=list)
     expanded: bool = False
-    superseded: bool = False
 
 
 @dataclass
@@ -228,7 +227,7 @@ class _Search:
             if other_zone.includes(zone):
                 covered = True
                 break
-            if interesting or node.superseded:
+            if interesting:
                 continue
             merged = other_zone.merge(zone) if MERGE else None
             if merged is None:
@@ -242,8 +241,7 @@ class _Search:
                 return None
             # Already expanded: a new state for the union takes its place for what comes
             # (what is queued below the old one still runs: it may hold merged ways in).
-            node.superseded = True
-            known.remove(other)
+            known.remove(other)  # the new one covers it from now on
             index = len(self.nodes)
             self.nodes.append(
                 _Node(
