@@ -81,11 +81,6 @@ class EventState:
         """No timer runs: the run has ended."""
         return not self.acts
 
-    @property
-    def marking(self) -> tuple[int, ...]:
-        """Not kept as a tuple here: use `EventSemantics.marking_of`."""
-        raise AttributeError("marking")
-
 
 class Successor(NamedTuple):
     """As `analysis.timed.semantics.Successor`."""

@@ -14,6 +14,7 @@ so (inconclusive; untimed analysis decides whether the mission can spin).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import heapq
 import time
 from collections.abc import Sequence
@@ -22,7 +23,7 @@ from dataclasses import dataclass, field
 from analysis.report import Verdict
 from analysis.timed.eventtime import EventSemantics, EventState, NotSafe
 from analysis.timed.eventtime import Successor as EventSuccessor
-from analysis.timed.model import US, ModelError, TimedModel, build_model, seconds
+from analysis.timed.model import US, CommandModel, ModelError, TimedModel, build_model, seconds
 from analysis.timed.options import TimedOptions
 from analysis.timed.results import DeadlineResult, FinalTiming, QueryAdequacy, TimedReport
 from analysis.timed.schedule import TimedSchedule
@@ -324,20 +325,6 @@ class _Search:
 
     # ------------------------------------------------------------------ report
 
-    def _first_path(self, index: int) -> list[str]:
-        """Labels of the way node ``index`` was first reached."""
-        labels = []
-        while index >= 0:
-            node = self.nodes[index]
-            parent, label = (
-                (node.alternatives[0][0], node.alternatives[0][1])
-                if node.alternatives
-                else (node.parent, node.label)
-            )
-            labels.append(label)
-            index = parent
-        return labels[::-1]
-
     def _to_end(self, index: int) -> int:
         """A node where some run through node ``index`` has ended (the first successor
         each time, kept as nodes so a witness can pass through them)."""
@@ -420,7 +407,7 @@ class _Search:
         labels = self._choose_path(index, self._target_point(index, latest))
         exact = labels is not None
         if labels is None:  # pragma: no cover - the union of the ways holds every point
-            labels = self._first_path(index)
+            labels = self._path_labels(index)  # the way it was first reached
         schedule = schedule_of(
             self.model, labels, kind=kind, reason=reason, latest=latest, events=self.events
         )
@@ -485,71 +472,42 @@ class _Search:
         )
 
     def _queries(self) -> tuple[QueryAdequacy, ...]:
-        net = self.model.net
-        out = []
-        for ref, command in sorted(self.model.commands.items()):
-            if command.time_out is None:
-                continue
-            span = net.transitions[ref].span
-            time_out = seconds(command.time_out)
-            node = self.found.timeouts.get(ref)
-            if node is not None:
-                schedule = self._schedule(
-                    self._to_end(node),
-                    "timeout",
-                    f"{command.name} ({command.command}) times out",
-                    False,
-                )
-                detail = _timeout_detail(command.name, command.command, time_out, schedule)
-                out.append(
-                    QueryAdequacy(
-                        command.name,
-                        command.command,
-                        time_out,
-                        Verdict.VIOLATED,
-                        detail,
-                        counterexample=schedule,
-                        span=span,
-                    )
-                )
-            elif not self.complete:
-                out.append(
-                    QueryAdequacy(
-                        command.name,
-                        command.command,
-                        time_out,
-                        Verdict.INCONCLUSIVE,
-                        f"no time-out found before the search stopped: {self.reason}",
-                        span=span,
-                    )
-                )
-            elif ref not in self.found.sent:
-                out.append(
-                    QueryAdequacy(
-                        command.name,
-                        command.command,
-                        time_out,
-                        Verdict.PROVEN,
-                        "never sent under these timing bounds, so it never times out",
-                        span=span,
-                    )
-                )
-            else:
-                waited = seconds(self.found.waited.get(ref, 0))
-                margin = time_out - waited
-                out.append(
-                    QueryAdequacy(
-                        command.name,
-                        command.command,
-                        time_out,
-                        Verdict.PROVEN,
-                        f"replies done at most {waited:.3f} s after it arrives, "
-                        f"{margin:.3f} s before its {time_out:g} s time-out",
-                        span=span,
-                        margin_s=margin,
-                    )
-                )
-        return tuple(out)
+        return tuple(
+            self._query(ref, command)
+            for ref, command in sorted(self.model.commands.items())
+            if command.time_out is not None
+        )
+
+    def _query(self, ref: int, command: CommandModel) -> QueryAdequacy:
+        """The adequacy of one watched query's time-out."""
+        assert command.time_out is not None
+        time_out = seconds(command.time_out)
+        result = functools.partial(
+            QueryAdequacy,
+            command.name,
+            command.command,
+            time_out,
+            span=self.model.net.transitions[ref].span,
+        )
+        node = self.found.timeouts.get(ref)
+        if node is not None:
+            reason = f"{command.name} ({command.command}) times out"
+            schedule = self._schedule(self._to_end(node), "timeout", reason, False)
+            detail = _timeout_detail(command.name, command.command, time_out, schedule)
+            return result(Verdict.VIOLATED, detail, counterexample=schedule)
+        if not self.complete:
+            why = f"no time-out found before the search stopped: {self.reason}"
+            return result(Verdict.INCONCLUSIVE, why)
+        if ref not in self.found.sent:
+            why = "never sent under these timing bounds, so it never times out"
+            return result(Verdict.PROVEN, why)
+        waited = seconds(self.found.waited.get(ref, 0))
+        margin = time_out - waited
+        detail = (
+            f"replies done at most {waited:.3f} s after it arrives, "
+            f"{margin:.3f} s before its {time_out:g} s time-out"
+        )
+        return result(Verdict.PROVEN, detail, margin_s=margin)
 
     def _deadlines(self) -> tuple[DeadlineResult, ...]:
         out = []
