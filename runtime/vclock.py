@@ -127,6 +127,23 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     def _clock_resolution(self, _: float) -> None:
         pass  # asyncio's own value does not suit a clock that may read 1.7e9
 
+    def quiet_until(self) -> float | None:
+        """How long nothing but the caller can run: the time of the earliest timer.
+
+        None when something else may run sooner: a callback is ready (it runs at the
+        present time, before any timer) or a thread job is in flight. ``math.inf`` when
+        no timer is scheduled. Called from a callback (e.g. a task's step), this tells
+        the caller that until that time no other code of the program will run and the
+        clock will not move except to reach a timer the caller sets, so work the caller
+        would have done at its own timers before then can be done at once, with the
+        times it would have had (`runtime.vehicle.server.VehicleServer` steps a vehicle
+        ahead so). Cancelled timers are not counted: they never run.
+        """
+        if self._virtual.thread_jobs or getattr(self, "_ready", None):
+            return None
+        scheduled: list[asyncio.TimerHandle] = getattr(self, "_scheduled", [])
+        return min((h.when() for h in scheduled if not h.cancelled()), default=math.inf)
+
     def run_in_executor(
         self, executor: Executor | None, func: Callable[[*Ts], T], *args: *Ts
     ) -> asyncio.Future[T]:

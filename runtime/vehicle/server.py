@@ -236,6 +236,16 @@ class _LogThrottle:
         else:
             burst.suppressed += 1
 
+    @property
+    def pending(self) -> bool:
+        """Whether a later `flush` may log a line (some kind had lines held back).
+
+        Forgetting a kind whose period is over logs nothing when none was held back,
+        and a kind's next line forgets an expired period by itself: so when this is
+        False, a `flush` may be skipped without changing what is logged.
+        """
+        return any(burst.suppressed for burst in self._kinds.values())
+
     def flush(self, *, force: bool = False) -> None:
         """Summarise and forget every kind whose period is over (all of them if ``force``)."""
         now = self._clock()
@@ -402,6 +412,8 @@ class VehicleServer(Generic[M]):
         self._acceptor: asyncio.Task[None] | None = None
         self._udp: asyncio.DatagramTransport | None = None
         self._stepper: asyncio.Task[None] | None = None
+        self._held: list[Reply] = []
+        """Replies of a tick taken ahead of the loop's clock, sent when it gets there."""
         self._last_wall = 0.0
         self._next_sample = vehicle.time
         self._address: tuple[str, int] | None = None
@@ -631,8 +643,16 @@ class VehicleServer(Generic[M]):
         self._issue(replies)
 
     async def _step_loop(self) -> None:
+        loop = asyncio.get_running_loop()
+        quiet_until: Callable[[], float | None] | None = getattr(loop, "quiet_until", None)
+        if self._clock != loop.time:
+            quiet_until = None  # ticks on another clock than the loop's: no look-ahead
         while True:
-            self.catch_up()
+            if self._held:
+                held, self._held = self._held, []
+                self._issue(held)  # the vehicle is already at this tick (`_quiet_ticks`)
+            else:
+                self.catch_up()
             active = self._active
             if active is not None and not active.closed:
                 now = self._clock()
@@ -640,7 +660,71 @@ class VehicleServer(Generic[M]):
                     active.send(Heartbeat(self.vehicle.time), now)
             self._commit_record()
             self._throttled.flush()
-            await asyncio.sleep(self._tick)
+            horizon = None if quiet_until is None else quiet_until()
+            if horizon is None or not await self._quiet_ticks(loop, horizon):
+                await asyncio.sleep(self._tick)
+
+    async def _quiet_ticks(self, loop: asyncio.AbstractEventLoop, horizon: float) -> bool:
+        """Do now the ticks before ``horizon`` that nobody would see; wake for the next.
+
+        Under virtual time (`runtime.vclock.VirtualTimeLoop.quiet_until`) no other code
+        runs before ``horizon``, so a tick that only steps the vehicle (no telemetry
+        sample, heartbeat, log commit or log line due) changes nothing anyone could see
+        before then: it is done at once, on the clock reading it would have had. That
+        reading is the event loop's own arithmetic for a sleep of one tick,
+        ``t + ((t + tick) - t)``, and a tick is taken ahead only if the loop's clock can
+        land on the reading of the tick after it exactly, from the present reading (the
+        loop moves its clock by ``when - now``). Replies a quiet tick produced are held
+        (`_held`) and sent when the loop reaches that tick, as they would have been. A
+        fuzz run thus makes about three trips through the event loop a second instead of
+        twenty, and does exactly what it did (``tests/runtime/fuzz/test_golden.py``).
+
+        Returns False, having done nothing, when not even the next tick can be taken
+        (the caller sleeps one tick as usual); else True once the loop reached the tick
+        after the last one taken (or the one whose replies are held).
+        """
+        now = self._clock()
+        tick = self._tick
+        t = now
+        when = t + tick
+        taken = 0
+        while taken < _QUIET_MAX_TICKS:
+            at = t + (when - t)  # the clock's reading at the tick due at ``when``
+            after = at + tick
+            if when >= horizon - _QUIET_MARGIN or now + (after - now) != at + (after - at):
+                break  # another timer first, or the loop could not land on the tick after
+            if not self._quiet_at(at):
+                break
+            elapsed = max(0.0, at - self._last_wall)
+            self._last_wall = at
+            self._held = self.vehicle.advance_to(self.vehicle.time + elapsed * self.speed)
+            taken += 1
+            if self._held:
+                break  # wake at this tick to send them
+            t, when = at, after
+        if taken == 0:
+            return False
+        future: asyncio.Future[None] = loop.create_future()
+        handle = loop.call_at(when, _wake, future)
+        try:
+            await future
+        finally:
+            handle.cancel()
+        return True
+
+    def _quiet_at(self, at: float) -> bool:
+        """Whether a tick at clock reading ``at`` would only step the vehicle."""
+        target = self.vehicle.time + max(0.0, at - self._last_wall) * self.speed
+        if self._next_sample <= target or self._throttled.pending:
+            return False
+        active = self._active
+        if (
+            active is not None
+            and not active.closed
+            and at - active.last_sent >= self._heartbeat_interval
+        ):
+            return False
+        return self._events is None or at - self._last_commit < 1.0
 
     def _record_sample(self, t: TelemetryRecord) -> None:
         if self._events is None:
@@ -966,6 +1050,19 @@ class VehicleServer(Generic[M]):
         # Replies this command caused for other commands (a replaced task's queries): the
         # model hands them out from its next advance, stamped with this command's time.
         self._issue(self.vehicle.advance_to(self.vehicle.time))
+
+
+_QUIET_MARGIN = 1e-6
+"""Seconds before another's timer within which no tick is taken ahead: a tick due at the
+same reading as another timer runs in the loop's own order, not ours."""
+
+_QUIET_MAX_TICKS = 1000
+"""Ticks taken ahead at most at once (the vehicle's time runs at most this far ahead)."""
+
+
+def _wake(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)
 
 
 def _clip(detail: str) -> str:

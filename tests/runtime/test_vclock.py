@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import math
 import random
 import threading
 import time
@@ -193,3 +194,38 @@ def test_a_bad_start_or_timeout_is_refused() -> None:
         run_virtual(asyncio.sleep(1), start=float("nan"))
     with pytest.raises(ValueError, match="timeout a number >= 0"):
         run_virtual(asyncio.sleep(1), timeout=-1.0)
+
+
+def test_quiet_until_tells_the_earliest_timer_that_will_run() -> None:
+    async def main() -> list[float | None]:
+        loop = asyncio.get_running_loop()
+        assert isinstance(loop, VirtualTimeLoop)
+        seen: list[float | None] = [loop.quiet_until()]  # nothing scheduled
+        late = loop.call_at(50.0, lambda: None)
+        early = loop.call_at(20.0, lambda: None)
+        seen.append(loop.quiet_until())
+        early.cancel()  # a cancelled timer never runs: not counted
+        seen.append(loop.quiet_until())
+        loop.call_soon(lambda: None)  # a ready callback runs now, before any timer
+        seen.append(loop.quiet_until())
+        await asyncio.sleep(0)
+        seen.append(loop.quiet_until())
+        late.cancel()
+        return seen
+
+    assert run_virtual(main(), start=10.0) == [math.inf, 20.0, 50.0, None, 50.0]
+
+
+def test_quiet_until_is_none_while_a_thread_job_runs() -> None:
+    release = threading.Event()
+
+    async def main() -> tuple[float | None, float | None]:
+        loop = asyncio.get_running_loop()
+        assert isinstance(loop, VirtualTimeLoop)
+        job = loop.run_in_executor(None, release.wait, 5.0)
+        during = loop.quiet_until()
+        release.set()
+        await job
+        return during, loop.quiet_until()
+
+    assert run_virtual(main()) == (None, math.inf)
