@@ -30,8 +30,6 @@ import asyncio
 import hashlib
 import json
 import random
-import shutil
-import tempfile
 import time
 from collections import Counter
 from collections.abc import Iterable, Mapping
@@ -299,33 +297,22 @@ def run_one(
         runtime.eventlog.EventLogError: the log cannot be written.
     """
     started = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="coral-fuzz-") as scratch:
-        log_path = keep_log if keep_log is not None else Path(scratch) / "controller.sqlite"
-        log = EventLog.create(
-            log_path,
-            role="controller",
-            mission=net.name,
-            meta={"fuzz_seed": seed, "link": options.link.name, "certificate": approval.path},
-            net_json=json.dumps(net.canonical(), sort_keys=True),
-            net_digest=net.digest(),
+    log = _open_log(net, approval, seed, options, keep_log)
+    kept: Path | None = keep_log
+    try:
+        emulator = CountingEmulator(options.link, seed, options.link.analysis_bounds().max_delay_s)
+        result, vehicle_commands = run_virtual(
+            _simulate(net, approval, seed, options, log, emulator)
         )
-        try:
-            log.relax_durability()
-            emulator = CountingEmulator(
-                options.link, seed, options.link.analysis_bounds().max_delay_s
-            )
-            result, vehicle_commands = run_virtual(
-                _simulate(net, approval, seed, options, log, emulator)
-            )
-            digest, fired, events = _read_events(log, keep_events)
-        finally:
-            log.close()
-        kept: Path | None = keep_log
+        digest, fired, events = _read_events(log, keep_events)
         if keep_log is None and keep_failed_logs is not None and result.end is not RunEnd.FINAL:
             keep_failed_logs.mkdir(parents=True, exist_ok=True)
             kept = keep_failed_logs / f"seed-{seed}.sqlite"
             kept.unlink(missing_ok=True)
-            shutil.move(str(log_path), kept)
+            log.commit()  # what close would add, so the copy is the log a file would be
+            log.save_copy(kept)
+    finally:
+        log.close()
     return FuzzRun(
         index=index,
         seed=seed,
@@ -349,6 +336,41 @@ def run_one(
         over_bound=emulator.over_bound,
         longest_delay=emulator.longest_delay,
     )
+
+
+def _open_log(
+    net: Net,
+    approval: CertificateCheck,
+    seed: int,
+    options: FuzzOptions,
+    keep_log: Path | None,
+) -> EventLog:
+    """The run's controller log: at ``keep_log`` if given, else in memory only.
+
+    A fuzz run's log is kept only when the run failed (then `EventLog.save_copy` writes
+    it out) or when asked for: in memory, its commits cost no file system work.
+    """
+    meta = {"fuzz_seed": seed, "link": options.link.name, "certificate": approval.path}
+    net_json = json.dumps(net.canonical(), sort_keys=True)
+    if keep_log is None:
+        return EventLog.create_in_memory(
+            f"<fuzz run, seed {seed}>",
+            role="controller",
+            mission=net.name,
+            meta=meta,
+            net_json=net_json,
+            net_digest=net.digest(),
+        )
+    log = EventLog.create(
+        keep_log,
+        role="controller",
+        mission=net.name,
+        meta=meta,
+        net_json=net_json,
+        net_digest=net.digest(),
+    )
+    log.relax_durability()
+    return log
 
 
 def _read_events(log: EventLog, keep: bool) -> tuple[str, dict[str, int], tuple[Event, ...]]:
