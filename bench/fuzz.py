@@ -1,8 +1,14 @@
 """Schedules per second of ``coral-run fuzz`` on the pool mission; print the figures.
 
-Run: ``.venv/bin/python bench/fuzz.py [--runs N] [--link PROFILE] [--seed S]``.
+Run: ``.venv/bin/python bench/fuzz.py [--runs N] [--link PROFILE] [--seed S] [--before TREE]``.
 
-Two figures:
+Three figures:
+
+* per core, before and after (``--before TREE``, a checkout of an older version, e.g.
+  ``git worktree add /tmp/before REV``): the same seeds run serially in a fresh process
+  of each tree, alternately, ``--rounds`` times; printed: schedules per second of each
+  round, the medians and their ratio. Only the package code differs: both processes run
+  this file's measuring loop, with the older tree first on the import path.
 
 * network level, what ``coral-run fuzz`` does: each schedule is one whole run of the
   pool mission through the controller, its event log, the link emulator and the
@@ -19,8 +25,11 @@ The pool mission is verified first and runs under its real certificate.
 from __future__ import annotations
 
 import argparse
+import os
 import random
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -36,6 +45,65 @@ from runtime.schedule import MessageFate, Outage, Schedule, Timing, run_schedule
 
 REPO = Path(__file__).resolve().parent.parent
 POOL = REPO / "examples" / "pool_mission" / "pool_mission.coral"
+
+
+SERIAL = """
+import sys, time
+from pathlib import Path
+from analysis.certificate import CertificateCheck, tool_version
+from coral_lang.compiler import compile_mission
+from runtime.fuzz import FuzzOptions, run_one
+from runtime.link import load_link_profile
+runs, seed, link = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+net = compile_mission(Path("examples/pool_mission/pool_mission.coral"))
+approval = CertificateCheck(
+    path="unverified (fuzz only)", net_digest=net.digest(), issued="", tool_version=tool_version()
+)
+options = FuzzOptions(runs=runs, seed=seed, link=load_link_profile(link))
+run_one(net, approval, seed + runs, options)  # warm-up (imports, caches): not timed
+wall, cpu = time.perf_counter(), time.process_time()
+for index in range(runs):
+    run_one(net, approval, seed + index, options)
+print(runs / (time.perf_counter() - wall), runs / (time.process_time() - cpu))
+"""
+"""Runs seeds ``seed .. seed+runs-1`` serially; prints schedules per wall and per CPU second.
+The same text runs in both trees, so only their packages differ."""
+
+
+def serial_rate(tree: Path, runs: int, seed: int, link: str) -> tuple[float, float]:
+    """Schedules per wall second and per CPU second of a serial fuzz in ``tree``'s code."""
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    out = subprocess.run(
+        [sys.executable, "-c", SERIAL, str(runs), str(seed), link],
+        cwd=tree,
+        env=env,
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.split()
+    return float(out[0]), float(out[1])
+
+
+def before_and_after(before: Path, runs: int, seed: int, link: str, rounds: int) -> None:
+    """Print per-core schedules per second of ``before`` and of this tree, alternately."""
+    print(f"per core: {runs} serial runs of the pool mission over '{link}', {rounds} rounds")
+    print(f"  {'round':>5} {'before /s':>10} {'after /s':>10}   (wall; per CPU second)")
+    rates: dict[str, list[float]] = {"before": [], "after": []}
+    for number in range(1, rounds + 1):
+        old = serial_rate(before, runs, seed, link)
+        new = serial_rate(REPO, runs, seed, link)
+        rates["before"].append(old[0])
+        rates["after"].append(new[0])
+        print(
+            f"  {number:>5} {old[0]:>10.2f} {new[0]:>10.2f}   "
+            f"({old[1]:.2f} and {new[1]:.2f} per CPU second)"
+        )
+    old_median = statistics.median(rates["before"])
+    new_median = statistics.median(rates["after"])
+    print(
+        f"  median {old_median:>9.2f} {new_median:>10.2f}   "
+        f"after / before: {new_median / old_median:.2f}x"
+    )
 
 
 def random_schedule(rng: random.Random) -> Schedule:
@@ -79,7 +147,20 @@ def main(argv: list[str] | None = None) -> int:
         default=2000,
         help="engine-level schedules (default 2000)",
     )
+    parser.add_argument(
+        "--before",
+        type=Path,
+        help="a checkout of an older version: time it against this one, per core",
+    )
+    parser.add_argument(
+        "--rounds", type=positive_int, default=3, help="alternate rounds for --before (3)"
+    )
     args = parser.parse_args(argv)
+    if args.before is not None:
+        fuzz_code = args.before / "runtime"
+        if not ((fuzz_code / "fuzz").is_dir() or (fuzz_code / "fuzz.py").is_file()):
+            parser.error(f"--before {args.before}: not a checkout of coral (no runtime/fuzz)")
+        before_and_after(args.before.resolve(), args.runs, args.seed, args.link, args.rounds)
     net = compile_mission(POOL)
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "pool.certificate.json"
