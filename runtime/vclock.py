@@ -58,14 +58,36 @@ class _VirtualSelector(selectors.BaseSelector):
         self._real = selectors.DefaultSelector()
         self.now = float(start)
         self.thread_jobs = 0
+        self.wake_fds: frozenset[int] = frozenset()
+        """Descriptors that only wake a waiting loop (the loop's self-pipe): while no
+        other is registered and no signal handler is set, `select` need not poll."""
+        self.signal_handlers = False
+        self.poll = True
+        """Whether `select` polls the real selector (a system call) before moving time."""
 
     def register(
         self, fileobj: FileDescriptorLike, events: int, data: Any = None
     ) -> selectors.SelectorKey:
-        return self._real.register(fileobj, events, data)
+        key = self._real.register(fileobj, events, data)
+        self.update_poll()
+        return key
 
     def unregister(self, fileobj: FileDescriptorLike) -> selectors.SelectorKey:
-        return self._real.unregister(fileobj)
+        key = self._real.unregister(fileobj)
+        self.update_poll()
+        return key
+
+    def update_poll(self) -> None:
+        """Poll unless only wake-up descriptors are registered and no signal handler is set.
+
+        The self-pipe matters to a loop that waits for it; this one never waits (but for
+        thread jobs, when it does poll). Callbacks from other threads are queued directly
+        and run at the next iteration whatever the pipe says; a signal handler is only run
+        by reading the pipe, and a socket only by polling, so either keeps the polls on.
+        """
+        self.poll = self.signal_handlers or any(
+            key.fd not in self.wake_fds for key in self._real.get_map().values()
+        )
 
     def modify(
         self, fileobj: FileDescriptorLike, events: int, data: Any = None
@@ -79,9 +101,12 @@ class _VirtualSelector(selectors.BaseSelector):
         self._real.close()
 
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
-        events = self._real.select(0)
-        if events or timeout == 0:
-            return events
+        if self.poll or self.thread_jobs:
+            events = self._real.select(0)
+            if events:
+                return events
+        if timeout == 0:
+            return []
         if self.thread_jobs:
             # A thread job will wake the loop (call_soon_threadsafe); its work is free.
             return self._real.select(None)
@@ -110,6 +135,25 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
     def __init__(self, start: float = 0.0) -> None:
         self._virtual = _VirtualSelector(start)
         super().__init__(self._virtual)
+        wake = getattr(self, "_ssock", None)
+        if wake is not None:
+            self._virtual.wake_fds = frozenset({wake.fileno()})
+            self._virtual.update_poll()
+
+    def add_signal_handler(self, sig: int, callback: Callable[[*Ts], object], *args: *Ts) -> None:
+        """As for any loop; while a handler is set, real descriptors are polled each turn."""
+        super().add_signal_handler(sig, callback, *args)
+        self._note_signal_handlers()
+
+    def remove_signal_handler(self, sig: int) -> bool:
+        """As for any loop."""
+        removed = super().remove_signal_handler(sig)
+        self._note_signal_handlers()
+        return removed
+
+    def _note_signal_handlers(self) -> None:
+        self._virtual.signal_handlers = bool(getattr(self, "_signal_handlers", True))
+        self._virtual.update_poll()
 
     def time(self) -> float:
         """The virtual clock, in seconds."""
@@ -142,6 +186,11 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
         if self._virtual.thread_jobs or getattr(self, "_ready", None):
             return None
         scheduled: list[asyncio.TimerHandle] = getattr(self, "_scheduled", [])
+        if not scheduled:
+            return math.inf
+        first = scheduled[0]  # a heap: the earliest of all, cancelled or not
+        if not first.cancelled():
+            return first.when()
         return min((h.when() for h in scheduled if not h.cancelled()), default=math.inf)
 
     def run_in_executor(

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import asyncio
 import math
+import os
 import random
+import signal
+import socket
 import threading
 import time
 
@@ -229,3 +232,38 @@ def test_quiet_until_is_none_while_a_thread_job_runs() -> None:
         return during, loop.quiet_until()
 
     assert run_virtual(main()) == (None, math.inf)
+
+
+def test_real_descriptors_are_polled_only_when_something_can_come_from_them() -> None:
+    async def main() -> list[bool]:
+        loop = asyncio.get_running_loop()
+        assert isinstance(loop, VirtualTimeLoop)
+        seen = [loop._virtual.poll]  # only the loop's own wake-up pipe: no poll
+        first, second = socket.socketpair()
+        loop.add_reader(first, lambda: None)
+        seen.append(loop._virtual.poll)  # a socket: polled
+        loop.remove_reader(first)
+        seen.append(loop._virtual.poll)
+        loop.add_signal_handler(signal.SIGUSR1, lambda: None)
+        seen.append(loop._virtual.poll)  # a signal handler runs only through the pipe
+        loop.remove_signal_handler(signal.SIGUSR1)
+        seen.append(loop._virtual.poll)
+        first.close()
+        second.close()
+        return seen
+
+    assert run_virtual(main()) == [False, True, False, True, False]
+
+
+def test_a_signal_still_reaches_its_handler_under_virtual_time() -> None:
+    async def main() -> float:
+        loop = asyncio.get_running_loop()
+        got = loop.create_future()
+        loop.add_signal_handler(signal.SIGUSR1, lambda: got.set_result(loop.time()))
+        loop.call_later(5.0, os.kill, os.getpid(), signal.SIGUSR1)
+        try:
+            return await asyncio.wait_for(got, 60.0)
+        finally:
+            loop.remove_signal_handler(signal.SIGUSR1)
+
+    assert run_virtual(main()) == 5.0
