@@ -36,12 +36,11 @@ class AxisController:
         "_bias",
         "_h",
         "_k",
-        "_ki",
         "_kp",
         "_kq",
-        "_kv",
         "_limit",
-        "_m",
+        "_m_ki",
+        "_m_kv",
         "_vmax",
         "integral",
     )
@@ -59,14 +58,15 @@ class AxisController:
     ) -> None:
         self._kp = gains.kp
         self._vmax = gains.v_max if v_max is None else v_max
-        self._kv = gains.kv
-        self._ki = gains.ki
-        self._m = mass
         self._k = linear
         self._kq = quadratic
         self._limit = limit
         self._bias = bias
         self._h = step_s
+        # The products that lead the velocity and integral terms, formed once: the same
+        # first multiplication ``m * kv`` (``m * ki``) that each step would repeat.
+        self._m_kv = mass * gains.kv
+        self._m_ki = mass * gains.ki
         self.integral = 0.0
 
     def reset(self) -> None:
@@ -76,10 +76,7 @@ class AxisController:
     def velocity(self, v_ref: float, v: float) -> float:
         """Force to drive velocity ``v`` to ``v_ref``."""
         return (
-            self._m * self._kv * (v_ref - v)
-            + self._k * v_ref
-            + self._kq * abs(v_ref) * v_ref
-            + self._bias
+            self._m_kv * (v_ref - v) + self._k * v_ref + self._kq * abs(v_ref) * v_ref + self._bias
         )
 
     def position(self, error: float, v: float, drift: float = 0.0) -> float:
@@ -93,10 +90,26 @@ class AxisController:
         """
         top = self._vmax
         v_ref = self._kp * error
-        clamped = v_ref > top or v_ref < -top
-        v_ref = (top if v_ref > top else -top if v_ref < -top else v_ref) - drift
-        force = self.velocity(v_ref, v) + self._m * self._ki * self.integral
+        if v_ref > top:
+            clamped = True
+            v_ref = top - drift
+        elif v_ref < -top:
+            clamped = True
+            v_ref = -top - drift
+        else:
+            clamped = False
+            v_ref = v_ref - drift
+        # `velocity`, written out (one call less per axis and step), then the integral term.
+        force = (
+            self._m_kv * (v_ref - v)
+            + self._k * v_ref
+            + self._kq * abs(v_ref) * v_ref
+            + self._bias
+            + self._m_ki * self.integral
+        )
         # Integrate only in the linear region: not speed-clamped, thrusters not saturated.
-        if not clamped and -self._limit < force < self._limit:
-            self.integral += error * self._h
+        if not clamped:
+            limit = self._limit
+            if -limit < force < limit:
+                self.integral += error * self._h
         return force

@@ -23,12 +23,13 @@ from romeo_sim.pool import Pool
 
 __all__ = ["Dynamics", "wrap_angle"]
 
+_PI = math.pi
 _TWO_PI = 2.0 * math.pi
 
 
 def wrap_angle(angle: float) -> float:
     """``angle`` (rad) brought into [-pi, pi)."""
-    return (angle + math.pi) % _TWO_PI - math.pi
+    return (angle + _PI) % _TWO_PI - _PI
 
 
 class Dynamics:
@@ -71,6 +72,8 @@ class Dynamics:
             (step_s * im, step_s * im * kl, step_s * im * kql)
             for im, kl, kql in zip(self._inv_m, self._k, self._kq, strict=True)
         )
+        # The same twelve numbers in one flat tuple, unpacked at once in `step`.
+        self._flat_coef = tuple(c for axis in self.coef for c in axis)
         self._lag = 1.0 - math.exp(-step_s / config.thruster_lag_s)
         self.buoyancy = config.net_buoyancy_n
         self._radius = config.radius_m
@@ -89,19 +92,27 @@ class Dynamics:
         cw = lw if cw > lw else -lw if cw < -lw else cw
         cr = lr if cr > lr else -lr if cr < -lr else cr
         a = self._lag
-        self.tu += a * (cu - self.tu)
-        self.tv += a * (cv - self.tv)
-        self.tw += a * (cw - self.tw)
-        self.tr += a * (cr - self.tr)
+        # Locals stand in for the attributes (this runs every step); the arithmetic is
+        # that of ``self.tu += a * (cu - self.tu)`` and so on, operation for operation.
+        tu = self.tu
+        tu += a * (cu - tu)
+        tv = self.tv
+        tv += a * (cv - tv)
+        tw = self.tw
+        tw += a * (cw - tw)
+        tr = self.tr
+        tr += a * (cr - tr)
+        self.tu, self.tv, self.tw, self.tr = tu, tv, tw, tr
         h = self.h
-        (au, bu, qu), (av, bv, qv), (aw, bw, qw), (ar, br, qr) = self.coef
+        au, bu, qu, av, bv, qv, aw, bw, qw, ar, br, qr = self._flat_coef
         u, v, w, r = self.u, self.v, self.w, self.r
-        u += au * self.tu - (bu + qu * abs(u)) * u
-        v += av * self.tv - (bv + qv * abs(v)) * v
-        w += aw * (self.tw - self.buoyancy) - (bw + qw * abs(w)) * w
-        r += ar * self.tr - (br + qr * abs(r)) * r
-        c = math.cos(self.psi)
-        s = math.sin(self.psi)
+        u += au * tu - (bu + qu * abs(u)) * u
+        v += av * tv - (bv + qv * abs(v)) * v
+        w += aw * (tw - self.buoyancy) - (bw + qw * abs(w)) * w
+        r += ar * tr - (br + qr * abs(r)) * r
+        psi = self.psi
+        c = math.cos(psi)
+        s = math.sin(psi)
         pool = self.pool
         vn = c * u - s * v + pool.current_north
         ve = s * u + c * v + pool.current_east
@@ -128,8 +139,8 @@ class Dynamics:
         elif z > self._bottom:
             z, w = self._bottom, min(w, 0.0)
         self.x, self.y, self.z = x, y, z
-        psi = self.psi + h * r
-        if psi >= math.pi or psi < -math.pi:
+        psi += h * r
+        if psi >= _PI or psi < -_PI:
             psi = wrap_angle(psi)
         self.psi = psi
         self.u, self.v, self.w, self.r = u, v, w, r

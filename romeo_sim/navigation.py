@@ -32,6 +32,9 @@ from romeo_sim.sensors import SonarPing
 __all__ = ["FixResult", "HorizontalEKF", "Navigation"]
 
 _COV_STRIDE = 10  # steps between covariance propagations when no measurement comes
+_INF = math.inf
+_PI = math.pi
+_HALF_PI = 0.5 * math.pi
 
 
 @dataclass(frozen=True)
@@ -55,6 +58,8 @@ class HorizontalEKF:
     numpy array, carried lazily: in one stride over the steps since it last moved, when
     a measurement needs it or every ``_COV_STRIDE`` steps. The Jacobian barely changes
     over a stride of half a second at ROV speeds, and this keeps the cost per step small.
+    For the same reason the stride's Jacobian is written into one reused array through a
+    flat view of it, and the process noise of each stride length is formed once.
     The current is a random walk; it lets the filter follow a vehicle that drifts
     although its thrust model says it should not (in a still pool it stays near zero).
 
@@ -75,6 +80,7 @@ class HorizontalEKF:
         step_s: float,
     ) -> None:
         self._coef = body.coef[:2]
+        (self._au, self._bu, self._qu), (self._av, self._bv, self._qv) = self._coef
         self._pool = pool
         self._h = step_s
         self._gate2 = config.gate_sigma**2
@@ -82,6 +88,8 @@ class HorizontalEKF:
         q_velocity = (config.process_accel_sd_m_s2 * step_s) ** 2
         q_current = config.current_walk_m_s**2 * step_s
         self._q_step = np.diag([1e-8, 1e-8, q_velocity, q_velocity, q_current, q_current])
+        # k * _q_step for the stride lengths k = 0.._COV_STRIDE (propagate adds one).
+        self._q_strides = [k * self._q_step for k in range(_COV_STRIDE + 1)]
         self._current_var = config.current_sd_m_s**2
         self._r_range = sensors.sonar_range_sd_m**2
         self._r_psi = math.radians(sensors.compass_sd_deg) ** 2
@@ -89,6 +97,9 @@ class HorizontalEKF:
         self.x = self.y = self.u = self.v = self.cn = self.ce = 0.0
         self.p = np.zeros((6, 6))
         self._f = np.eye(6)
+        self._f_t = self._f.T
+        # The Jacobian's 36 entries row by row, written through without numpy indexing.
+        self._f_flat = self._f.data.cast("B").cast("d")
         self._c, self._s = 1.0, 0.0  # heading of the last prediction, for the Jacobian
         self.accepted = 0
         self.rejected = 0
@@ -119,14 +130,14 @@ class HorizontalEKF:
         c = math.cos(psi)
         s = math.sin(psi)
         u, v = self.u, self.v
-        (au, bu, qu), (av, bv, qv) = self._coef
         self.x += h * (c * u - s * v + self.cn)
         self.y += h * (s * u + c * v + self.ce)
-        self.u = u + au * force_u - (bu + qu * abs(u)) * u
-        self.v = v + av * force_v - (bv + qv * abs(v)) * v
+        self.u = u + self._au * force_u - (self._bu + self._qu * abs(u)) * u
+        self.v = v + self._av * force_v - (self._bv + self._qv * abs(v)) * v
         self._c, self._s = c, s
-        self._pending += 1
-        if self._pending >= _COV_STRIDE:
+        pending = self._pending + 1
+        self._pending = pending
+        if pending >= _COV_STRIDE:
             self.propagate()
 
     def propagate(self) -> None:
@@ -135,18 +146,22 @@ class HorizontalEKF:
         if k == 0:
             return
         self._pending = 0
-        (_, bu, qu), (_, bv, qv) = self._coef
         hk = self._h * k
         c, s = self._c, self._s
-        f = self._f
-        f[0, 2] = c * hk
-        f[0, 3] = -s * hk
-        f[1, 2] = s * hk
-        f[1, 3] = c * hk
-        f[0, 4] = f[1, 5] = hk
-        f[2, 2] = max(0.0, 1.0 - k * (bu + 2.0 * qu * abs(self.u)))
-        f[3, 3] = max(0.0, 1.0 - k * (bv + 2.0 * qv * abs(self.v)))
-        self.p = f @ self.p @ f.T + k * self._q_step
+        f = self._f_flat  # f[i, j] is f[6 * i + j]
+        f[2] = c * hk  # [0, 2]
+        f[3] = -s * hk  # [0, 3]
+        f[8] = s * hk  # [1, 2]
+        f[9] = c * hk  # [1, 3]
+        f[4] = f[11] = hk  # [0, 4], [1, 5]
+        f[14] = max(0.0, 1.0 - k * (self._bu + 2.0 * self._qu * abs(self.u)))  # [2, 2]
+        f[21] = max(0.0, 1.0 - k * (self._bv + 2.0 * self._qv * abs(self.v)))  # [3, 3]
+        # f @ p @ f.T, as ndarray.dot: the same cblas_dgemm calls with the same arguments
+        # (numpy sends both to BLAS for 6 x 6 doubles; the transpose is passed as a flag),
+        # so the same bits, without the matmul ufunc's dispatch (tests/romeo_sim pins it).
+        p = self._f.dot(self.p).dot(self._f_t)
+        p += self._q_strides[k] if k <= _COV_STRIDE else k * self._q_step
+        self.p = p
 
     def update(self, psi: float, head: float, measured: float) -> bool | None:
         """Fuse one sonar range; None when not near-normal, else accepted (True) or gated.
@@ -155,11 +170,15 @@ class HorizontalEKF:
         the filter fuses ``range cos(alpha)`` against the wall distance, whose Jacobian is
         +/-1 on x or y. Heading noise enters the measurement variance.
         """
-        if measured == math.inf:
+        if measured == _INF:
             return None
-        wall, alpha = nearest_wall(psi + head)
+        # `nearest_wall`, written out: most pings are not near-normal, and end here.
+        bearing = psi + head
+        quarter = round(bearing / _HALF_PI)
+        alpha = bearing - quarter * _HALF_PI
         if abs(alpha) > self._near:
             return None
+        wall = quarter % 4
         if self._pending:
             self.propagate()
         ca = math.cos(alpha)
@@ -175,8 +194,8 @@ class HorizontalEKF:
             index, sign, innovation = 1, -1.0, z - (pool.width - self.y)
         else:
             index, sign, innovation = 1, 1.0, z - self.y
-        column = self.p[:, index].copy()
-        s_var = float(column[index]) + r
+        p = self.p
+        s_var = float(p[index, index]) + r
         squared = innovation * innovation
         # Gate on the innovation's spread, and never beyond an absolute bound: after a
         # long spell of rejected echoes (at the surface) the spread has grown so much that
@@ -187,6 +206,7 @@ class HorizontalEKF:
             return False
         self.accepted += 1
         g = sign * innovation / s_var
+        column = p[:, index]  # a view: the outer product below is formed before p changes
         dx, dy, du, dv, dcn, dce = column.tolist()
         self.x += dx * g
         self.y += dy * g
@@ -194,7 +214,9 @@ class HorizontalEKF:
         self.v += dv * g
         self.cn += dcn * g
         self.ce += dce * g
-        self.p -= np.outer(column, column) * (1.0 / s_var)
+        gain = np.multiply.outer(column, column)  # np.outer, without its reshaping
+        gain *= 1.0 / s_var
+        p -= gain
         return True
 
 
@@ -245,6 +267,7 @@ class Navigation:
         self.r = 0.0
         self._started = False
         self._collector: _FixCollector | None = None
+        self._heave_coef = body.coef[2]
         self._alpha = config.depth_alpha
         self._beta_h = config.depth_beta / step_s
         self._compass_alpha = config.compass_alpha
@@ -262,7 +285,7 @@ class Navigation:
             self._started = True
             self.z, self.psi = depth, compass
         # Depth: model prediction, then alpha-beta correction.
-        aw, bw, qw = body.coef[2]
+        aw, bw, qw = self._heave_coef
         w = self.w
         w += aw * (body.tw - body.buoyancy) - (bw + qw * abs(w)) * w
         z = self.z + h * w
@@ -272,19 +295,19 @@ class Navigation:
         # Heading: integrate the gyro, pull towards the compass.
         psi = self.psi + h * gyro
         gap = compass - psi
-        if gap >= math.pi or gap < -math.pi:
+        if gap >= _PI or gap < -_PI:
             gap = wrap_angle(gap)
         psi += self._compass_alpha * gap
-        if psi >= math.pi or psi < -math.pi:
+        if psi >= _PI or psi < -_PI:
             psi = wrap_angle(psi)
         self.psi = psi
         self.r = gyro
         if self._collector is not None:
-            self._collector.add(self.psi, ping.head, ping.range)
+            self._collector.add(psi, ping.head, ping.range)
         if self.has_fix:
             ekf = self.ekf
-            ekf.predict(self.psi, body.tu, body.tv)
-            ekf.update(self.psi, ping.head, ping.range)
+            ekf.predict(psi, body.tu, body.tv)
+            ekf.update(psi, ping.head, ping.range)
 
     def start_fix(self) -> None:
         """Begin collecting a revolution of wall returns (the estimate, if any, runs on)."""

@@ -3,14 +3,15 @@
 All noise comes from seeded numpy Generators, one independent stream per sensor (so a
 change to one sensor does not shift the noise of the others). Draws are taken in blocks
 and handed out one float at a time: a numpy call per sample would cost more than the
-whole dynamics step.
+whole dynamics step. The sensors read once per step, so they keep what they need of
+their configuration and noise stream in attributes of their own.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator
-from functools import partial
+from itertools import chain, repeat
 
 import numpy as np
 import numpy.typing as npt
@@ -22,13 +23,17 @@ from romeo_sim.pool import Pool
 __all__ = ["Compass", "DepthGauge", "NoiseStream", "ScanningSonar", "SonarPing"]
 
 _BLOCK = 4096
+_PI = math.pi
+_TWO_PI = 2.0 * math.pi
+_INF = math.inf
 
 
 class NoiseStream:
     """Standard normal and uniform [0, 1) samples from one seeded Generator, in blocks.
 
-    ``normal`` and ``uniform`` are bound ``next`` of endless generators: calling them
-    costs about as much as a list index, which matters at one call per sensor per step.
+    ``normal`` and ``uniform`` are the bound ``__next__`` of endless iterators built from
+    C iterators only (a chain over blocks of draws): calling one costs about as much as a
+    list index, which matters at one call per sensor per step.
 
     Args:
         seed: a SeedSequence (or anything `numpy.random.default_rng` accepts).
@@ -43,44 +48,49 @@ class NoiseStream:
         normal_seed, uniform_seed = sequence.spawn(2)
         normals = np.random.default_rng(normal_seed).standard_normal
         uniforms = np.random.default_rng(uniform_seed).random
-        self.normal: Callable[[], float] = partial(next, _blocks(normals))
-        self.uniform: Callable[[], float] = partial(next, _blocks(uniforms))
+        self.normal: Callable[[], float] = _samples(normals).__next__
+        self.uniform: Callable[[], float] = _samples(uniforms).__next__
 
 
-def _blocks(draw: Callable[[int], npt.NDArray[np.float64]]) -> Iterator[float]:
-    while True:
-        yield from draw(_BLOCK).tolist()
+def _samples(draw: Callable[[int], npt.NDArray[np.float64]]) -> Iterator[float]:
+    """The endless stream of ``draw``'s samples, drawn `_BLOCK` at a time when needed."""
+    return chain.from_iterable(map(_block, repeat(draw)))
+
+
+def _block(draw: Callable[[int], npt.NDArray[np.float64]]) -> list[float]:
+    block: list[float] = draw(_BLOCK).tolist()
+    return block
 
 
 class DepthGauge:
     """Pressure depth sensor: true depth plus white noise, never reads above the surface."""
 
-    __slots__ = ("_noise", "_sd")
+    __slots__ = ("_normal", "_sd")
 
     def __init__(self, config: SensorConfig, noise: NoiseStream) -> None:
         self._sd = config.depth_sd_m
-        self._noise = noise
+        self._normal = noise.normal
 
     def read(self, body: Dynamics) -> float:
         """Depth, m (down positive)."""
-        value = body.z + self._sd * self._noise.normal()
+        value = body.z + self._sd * self._normal()
         return value if value > 0.0 else 0.0
 
 
 class Compass:
     """Magnetic compass (heading) with a rate gyro (yaw rate), both with white noise."""
 
-    __slots__ = ("_gyro_sd", "_noise", "_sd")
+    __slots__ = ("_gyro_sd", "_normal", "_sd")
 
     def __init__(self, config: SensorConfig, noise: NoiseStream) -> None:
         self._sd = math.radians(config.compass_sd_deg)
         self._gyro_sd = math.radians(config.gyro_sd_deg_s)
-        self._noise = noise
+        self._normal = noise.normal
 
     def read(self, body: Dynamics) -> tuple[float, float]:
         """(heading rad, yaw rate rad/s), heading clockwise from north, not wrapped."""
-        noise = self._noise
-        return body.psi + self._sd * noise.normal(), body.r + self._gyro_sd * noise.normal()
+        normal = self._normal
+        return body.psi + self._sd * normal(), body.r + self._gyro_sd * normal()
 
 
 class SonarPing:
@@ -121,7 +131,8 @@ class ScanningSonar:
         self._clutter_depth = config.surface_clutter_depth_m
         self._clutter_max = config.surface_clutter_max_fraction
         self._surface_slant = 1.0 / math.sin(math.radians(0.5 * config.sonar_vertical_beam_deg))
-        self._noise = noise
+        self._normal = noise.normal
+        self._uniform = noise.uniform
         self.head_step = 2.0 * math.pi * step_s / config.sonar_revolution_s
         self.revolution_s = config.sonar_revolution_s
         self.ping = SonarPing()
@@ -140,19 +151,19 @@ class ScanningSonar:
         """Turn the head one step and ping; returns the (reused) ping object."""
         ping = self.ping
         head = ping.head + self.head_step
-        if head >= math.pi:
-            head -= 2.0 * math.pi
+        if head >= _PI:
+            head -= _TWO_PI
         ping.head = head
         ping.time = time
         true_range = self._pool.ray_range(body.x, body.y, body.psi + head)
-        noise = self._noise
-        measured = true_range + self._sd * noise.normal()
+        measured = true_range + self._sd * self._normal()
         ping.false_return = False
-        if body.z < self._clutter_depth and noise.uniform() < self.clutter_fraction(body.z):
-            echo = 0.3 + body.z * self._surface_slant * (1.0 + 0.1 * noise.normal())
+        z = body.z
+        if z < self._clutter_depth and self._uniform() < self.clutter_fraction(z):
+            echo = 0.3 + z * self._surface_slant * (1.0 + 0.1 * self._normal())
             if echo < true_range:
                 # The surface echo arrives before the wall's.
                 measured = echo
                 ping.false_return = True
-        ping.range = measured if 0.0 < measured <= self._max else math.inf
+        ping.range = measured if 0.0 < measured <= self._max else _INF
         return ping

@@ -81,6 +81,7 @@ SUPPORTED_COMMANDS: tuple[str, ...] = (
     "SURFACE?",
 )
 _RESOURCES: tuple[str, ...] = ("depth", "heading", "horizontal")
+_PI = math.pi
 WATCHDOG_ID = -1
 
 
@@ -196,6 +197,8 @@ class Vehicle:
         self._watchdog_tripped = False
         self._release = config.control.surface_release_m
         self._plan_dirty = True
+        self._plan_fix: FixTask | None = None
+        self._plan_docking: DockingTask | None = None
         self._plan_horizontal: HorizontalTask | None = None
         self._plan_owns_yaw = False
         self._plan_psi: float | None = None
@@ -241,10 +244,21 @@ class Vehicle:
             raise ValueError(f"cannot move the vehicle clock from {self._clock} back to {t}")
         start, h = self._start, self._h
         limit = t + 1e-9
-        while start + (self._steps + 1) * h <= limit:
-            self._step(start + self._steps * h)
-            self._steps += 1
-        self._clock = max(t, self._clock)
+        steps = self._steps
+        # Step k runs at start + k * h, and runs when start + (k + 1) * h <= limit: the
+        # time tested for one step is the time of the next (the same expression).
+        due = start + (steps + 1) * h
+        if due <= limit:
+            step = self._step
+            now = start + steps * h
+            while due <= limit:
+                step(now)
+                steps += 1
+                self._steps = steps
+                now = due
+                due = start + (steps + 1) * h
+        if t >= self._clock:  # max(t, clock), which keeps t when the two are equal
+            self._clock = t
         out = self._outbox
         self._outbox = []
         return out
@@ -472,57 +486,68 @@ class Vehicle:
         body, nav = self.body, self.nav
         psi_m, r_m = self._compass.read(body)
         nav.step(self._gauge.read(body), psi_m, r_m, self.sonar.sense(body, now))
-        owners = self._owners
-        horizontal = owners.get("horizontal")
-        if horizontal is not None:
-            if isinstance(horizontal, FixTask) and now >= horizontal.ends - 1e-9:
-                self._finish_fix(horizontal, now)
-                horizontal = None
-            elif isinstance(horizontal, DockingTask) and horizontal.ready_to_emerge(nav, now):
-                horizontal.emerging = True
-                horizontal.resources = (*horizontal.resources, "depth")
-                self._log(now, f"{horizontal.label()}: over the docking point, emerging")
-                self._take(horizontal, ("depth",), now)
-        if self._queries:
+        if self._plan_dirty:
+            self._make_plan()
+        fix = self._plan_fix
+        if fix is not None:
+            if now >= fix.ends - 1e-9:
+                self._finish_fix(fix, now)
+        else:
+            docking = self._plan_docking
+            if docking is not None and docking.ready_to_emerge(nav, now):
+                docking.emerging = True
+                docking.resources = (*docking.resources, "depth")
+                self._log(now, f"{docking.label()}: over the docking point, emerging")
+                self._take(docking, ("depth",), now)
+        queries = self._queries
+        if queries:
             dock = self.dock
-            finished = [q for q in self._queries if q.step(nav, dock, now) is not None]
+            finished: list[SpaceTrapQuery] = []
+            for query in queries:  # a loop, not a comprehension: no function call per step
+                if query.step(nav, dock, now) is not None:
+                    finished.append(query)
             for query in finished:
-                self._queries.remove(query)
+                queries.remove(query)
                 kind = query.outcome
                 self._emit(query.command_id, query.name, kind, _query_detail(query, kind), now)
         # Control.
         if self._plan_dirty:
             self._make_plan()
         cu = cv = cr = cw = 0.0
-        ekf = nav.ekf
         task = self._plan_horizontal
         psi_ref = self._plan_psi
         if task is not None:
-            wish = task.guide(nav, self._plan_owns_yaw)
+            owns_yaw = self._plan_owns_yaw
+            wish = task.guide(nav, owns_yaw)
             if task.switches:
                 for text in task.switches:
                     self._log(now, text)
                 task.switches.clear()
+            ekf = nav.ekf
             if wish.hover:
                 # Hold ground, not water: cancel the estimated current in body axes.
-                c, s = math.cos(nav.psi), math.sin(nav.psi)
-                drift_u = c * ekf.cn + s * ekf.ce
-                drift_v = -s * ekf.cn + c * ekf.ce
+                psi = nav.psi
+                c, s = math.cos(psi), math.sin(psi)
+                cn, ce = ekf.cn, ekf.ce
+                drift_u = c * cn + s * ce
+                drift_v = -s * cn + c * ce
                 cu = self._surge.position(wish.a, ekf.u, drift_u)
                 cv = self._sway.position(wish.b, ekf.v, drift_v)
             else:
                 cu = self._surge.velocity(wish.a, ekf.u)
                 cv = self._sway.velocity(wish.b, ekf.v)
-            if self._plan_owns_yaw:
+            if owns_yaw:
                 psi_ref = wish.psi
         if psi_ref is not None:
             error = psi_ref - nav.psi
-            if error >= math.pi or error < -math.pi:
+            if error >= _PI or error < -_PI:
                 error = wrap_angle(error)
             cr = self._yaw.position(error, nav.r)
         depth_ref = self._plan_depth
-        if depth_ref is not None and not (self._plan_surfacing and nav.z < self._release):
-            cw = self._heave.position(depth_ref - nav.z, nav.w)
+        if depth_ref is not None:
+            z = nav.z
+            if not (self._plan_surfacing and z < self._release):
+                cw = self._heave.position(depth_ref - z, nav.w)
         body.step(cu, cv, cw, cr)
         if (
             self._armed
@@ -532,11 +557,17 @@ class Vehicle:
             self._trip_watchdog(now)
 
     def _make_plan(self) -> None:
-        """Work out, once per change of owners, which task drives which axis."""
+        """Work out, once per change of owners, which task drives which axis.
+
+        Also which task on ``horizontal`` each step must watch: a FIX_XY for its end, a
+        DOCKING for its arrival over the dock.
+        """
         owners = self._owners
         horizontal = owners.get("horizontal")
         heading = owners.get("heading")
         depth = owners.get("depth")
+        self._plan_fix = horizontal if isinstance(horizontal, FixTask) else None
+        self._plan_docking = horizontal if isinstance(horizontal, DockingTask) else None
         self._plan_horizontal = (
             horizontal
             if isinstance(horizontal, HorizontalTask) and not isinstance(horizontal, FixTask)

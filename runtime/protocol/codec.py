@@ -56,6 +56,10 @@ _RECEIVES: Final = {
 
 
 _UNAUTHENTICATED: Final = frozenset({RejectReason.BAD_TAG, RejectReason.NO_SESSION})
+_HEAD: Final = struct.Struct(">2sBHI")  # the header up to its CRC (magic..counter)
+_CRC: Final = struct.Struct(">H")
+# FrameType(value) for the known values, without the enum's call machinery.
+_FRAME_TYPES: Final = {int(t): t for t in FrameType}
 
 
 class StreamCodec:
@@ -160,7 +164,7 @@ class StreamCodec:
                 frame; or the counter is exhausted (reconnect: a new connection starts
                 a new session).
         """
-        if isinstance(msg, Hello | HelloReply):
+        if isinstance(msg, (Hello, HelloReply)):
             return self._encode_handshake(msg)
         if not isinstance(msg, _SENDS[self.role]):
             raise ProtocolError(f"the {self.role.name.lower()} does not send {type(msg).__name__}")
@@ -205,8 +209,8 @@ class StreamCodec:
                 f"{ftype.name} payload is {len(payload)} bytes; at most {MAX_PAYLOAD} "
                 "fit in a frame (shorten names, texts or params)"
             )
-        head = struct.pack(">2sBHI", STREAM_MAGIC, ftype, len(payload), counter)
-        body = head + struct.pack(">H", header_crc(head)) + payload
+        head = _HEAD.pack(STREAM_MAGIC, ftype, len(payload), counter)
+        body = head + _CRC.pack(header_crc(head)) + payload
         return body + frame_tag(key, self.role, body)
 
     # -- decoding --
@@ -249,16 +253,17 @@ class StreamCodec:
             frame = bytes(buf[pos : pos + total])
             result = self._accept(ftype, counter, frame)
             out.append(result)
-            if isinstance(result, Rejected) and result.reason in _UNAUTHENTICATED:
-                # The length may be the corrupted part: rescan from the next byte so a
-                # good frame inside the claimed span is not lost.
-                self._skipping = True
-                pos += 1
-            else:
-                self._skipping = False
-                pos += total
+            if isinstance(result, Rejected):
+                self.rejected += 1
+                if result.reason in _UNAUTHENTICATED:
+                    # The length may be the corrupted part: rescan from the next byte so
+                    # a good frame inside the claimed span is not lost.
+                    self._skipping = True
+                    pos += 1
+                    continue
+            self._skipping = False
+            pos += total
         del buf[:pos]
-        self.rejected += sum(isinstance(m, Rejected) for m in out)
         return out
 
     def _garbage(self, out: list[StreamMessage | Rejected], count: int) -> None:
@@ -269,6 +274,7 @@ class StreamCodec:
                     f"{count} bytes not starting a frame; skipping to the next frame start",
                 )
             )
+            self.rejected += 1
             self._skipping = True
 
     def _reject_start(
@@ -276,6 +282,7 @@ class StreamCodec:
     ) -> None:
         # One report per incident: the bytes skipped while resynchronising stay quiet.
         out.append(Rejected(reason, detail))
+        self.rejected += 1
         self._skipping = True
 
     def _accept(self, ftype: int, counter: int, frame: bytes) -> StreamMessage | Rejected:
@@ -291,7 +298,7 @@ class StreamCodec:
             return Rejected(RejectReason.BAD_TAG, f"frame type {ftype:#04x}, counter {counter}")
         payload = body[HEADER_SIZE:]
         if handshake:
-            return self._accept_handshake(FrameType(ftype), counter, payload)
+            return self._accept_handshake(_FRAME_TYPES[ftype], counter, payload)
         if counter <= self._recv_counter:
             return Rejected(
                 RejectReason.REPLAY, f"counter {counter} <= {self._recv_counter} already seen"
@@ -300,15 +307,16 @@ class StreamCodec:
         self._peer_verified = True
         if ftype not in KNOWN_TYPES:
             return Rejected(RejectReason.UNKNOWN_TYPE, f"frame type {ftype:#04x}")
-        if ftype not in _RECEIVES[self.role]:
+        known = _FRAME_TYPES[ftype]
+        if known not in _RECEIVES[self.role]:
             return Rejected(
                 RejectReason.UNEXPECTED,
-                f"{FrameType(ftype).name} does not go to the {self.role.name.lower()}",
+                f"{known.name} does not go to the {self.role.name.lower()}",
             )
         try:
-            return decode_payload(FrameType(ftype), payload)
+            return decode_payload(known, payload)
         except Malformed as exc:
-            return Rejected(RejectReason.MALFORMED, f"{FrameType(ftype).name}: {exc}")
+            return Rejected(RejectReason.MALFORMED, f"{known.name}: {exc}")
 
     def _accept_handshake(
         self, ftype: FrameType, counter: int, payload: bytes

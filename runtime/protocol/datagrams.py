@@ -21,6 +21,9 @@ __all__ = ["TELEMETRY_SIZE", "DatagramReceiver", "encode_datagram"]
 
 
 _TELEMETRY = struct.Struct(">2sBId6f")
+_TELEMETRY_TYPE = FrameType.TELEMETRY
+_VEHICLE = Role.VEHICLE
+_NAN = math.nan
 TELEMETRY_SIZE: Final = _TELEMETRY.size + TAG_SIZE  # 55
 
 
@@ -37,23 +40,28 @@ def encode_datagram(key: bytes, msg: TelemetryRecord) -> bytes:
     seq = uint(msg.seq, U32, "TelemetryRecord.seq")
     if seq == 0:
         raise ProtocolError("TelemetryRecord.seq starts at 1")
-    pose = [
-        finite(value, f"TelemetryRecord.{name}")
-        for name, value in (("x", msg.x), ("y", msg.y), ("z", msg.z), ("psi", msg.psi))
-    ]
-    for name, est in (("est_x", msg.est_x), ("est_y", msg.est_y)):
-        pose.append(math.nan if est is None else finite(est, f"TelemetryRecord.{name}"))
+    x = finite(msg.x, "TelemetryRecord.x")
+    y = finite(msg.y, "TelemetryRecord.y")
+    z = finite(msg.z, "TelemetryRecord.z")
+    psi = finite(msg.psi, "TelemetryRecord.psi")
+    est_x = _NAN if msg.est_x is None else finite(msg.est_x, "TelemetryRecord.est_x")
+    est_y = _NAN if msg.est_y is None else finite(msg.est_y, "TelemetryRecord.est_y")
     try:
         body = _TELEMETRY.pack(
             DATAGRAM_MAGIC,
-            FrameType.TELEMETRY,
+            _TELEMETRY_TYPE,
             seq,
             finite(msg.vehicle_time, "TelemetryRecord.vehicle_time"),
-            *pose,
+            x,
+            y,
+            z,
+            psi,
+            est_x,
+            est_y,
         )
     except (OverflowError, struct.error) as exc:
         raise ProtocolError(f"telemetry value out of float32 range: {exc}") from None
-    return body + frame_tag(key, Role.VEHICLE, body)
+    return body + frame_tag(key, _VEHICLE, body)
 
 
 class DatagramReceiver:
@@ -92,14 +100,15 @@ class DatagramReceiver:
         body, tag = bytes(data[:-TAG_SIZE]), bytes(data[-TAG_SIZE:])
         if body[:2] != DATAGRAM_MAGIC:
             return Rejected(RejectReason.BAD_MAGIC, "not a coral v1 datagram")
-        if not hmac.compare_digest(frame_tag(self._key, Role.VEHICLE, body), tag):
+        if not hmac.compare_digest(frame_tag(self._key, _VEHICLE, body), tag):
             return Rejected(RejectReason.BAD_TAG, "telemetry tag")
         _, ftype, seq, vtime, x, y, z, psi, ex, ey = _TELEMETRY.unpack(body)
-        if ftype != FrameType.TELEMETRY:
+        if ftype != _TELEMETRY_TYPE:
             return Rejected(RejectReason.UNKNOWN_TYPE, f"datagram type {ftype:#04x}")
         if seq <= self.last_seq:
             return Rejected(RejectReason.LATE, f"seq {seq} <= {self.last_seq} already accepted")
-        if not all(math.isfinite(v) for v in (vtime, x, y, z, psi)):
+        isfinite = math.isfinite
+        if not (isfinite(vtime) and isfinite(x) and isfinite(y) and isfinite(z) and isfinite(psi)):
             return Rejected(RejectReason.MALFORMED, "non-finite time or pose")
         if math.isinf(ex) or math.isinf(ey):
             return Rejected(RejectReason.MALFORMED, "infinite estimate")

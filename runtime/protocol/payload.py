@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Callable
+from typing import Any
 
 from runtime.protocol.auth import check_nonce
 from runtime.protocol.messages import (
@@ -50,6 +52,8 @@ class Malformed(Exception):
 
 def finite(value: float, what: str) -> float:
     """``value`` as a float; `ProtocolError` naming ``what`` unless a finite number."""
+    if type(value) is float and math.isfinite(value):
+        return value  # the usual case, checked first (float(value) would be value itself)
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ProtocolError(f"{what} must be a number, not {type(value).__name__}")
     value = float(value)
@@ -60,6 +64,8 @@ def finite(value: float, what: str) -> float:
 
 def uint(value: int, limit: int, what: str) -> int:
     """``value``; `ProtocolError` naming ``what`` unless an int in ``0..limit``."""
+    if type(value) is int and 0 <= value <= limit:
+        return value  # the usual case, checked first
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= limit:
         raise ProtocolError(f"{what} must be an integer in 0..{limit}, got {value!r}")
     return value
@@ -86,66 +92,113 @@ _U32S = struct.Struct(">I")
 _MAKE_SAFE_HEAD = struct.Struct(">Id")
 _MAKE_SAFE_ACK = struct.Struct(">IdB")
 _PARAM_FLOAT, _PARAM_INT, _PARAM_TEXT = 1, 2, 3
+# The frame types as plain module constants (an enum member costs a lookup per use).
+_HELLO_TYPE = FrameType.HELLO
+_HELLO_REPLY_TYPE = FrameType.HELLO_REPLY
+_COMMAND_TYPE = FrameType.COMMAND
+_REPLY_TYPE = FrameType.REPLY
+_REPLY_ACK_TYPE = FrameType.REPLY_ACK
+_MAKE_SAFE_TYPE = FrameType.MAKE_SAFE
+_MAKE_SAFE_ACK_TYPE = FrameType.MAKE_SAFE_ACK
+_HEARTBEAT_TYPE = FrameType.HEARTBEAT
 
 
 def encode_payload(msg: StreamMessage) -> tuple[FrameType, bytes]:
     """The frame type and payload of ``msg``; `ProtocolError` for a field out of range."""
-    if isinstance(msg, Hello):
-        return FrameType.HELLO, _HELLO.pack(
-            check_nonce(msg.nonce, "Hello.nonce"),
-            finite(msg.sent_at, "Hello.sent_at"),
-            uint(msg.mission_id, U64, "Hello.mission_id"),
-            1 if msg.resume else 0,
-            uint(msg.last_reply_seq, U32, "Hello.last_reply_seq"),
-            uint(msg.telemetry_port, U16, "Hello.telemetry_port"),
-        )
-    if isinstance(msg, HelloReply):
-        return FrameType.HELLO_REPLY, _HELLO_REPLY.pack(
-            check_nonce(msg.controller_nonce, "HelloReply.controller_nonce"),
-            check_nonce(msg.vehicle_nonce, "HelloReply.vehicle_nonce"),
-            finite(msg.received_at, "HelloReply.received_at"),
-            finite(msg.sent_at, "HelloReply.sent_at"),
-            1 if msg.resumed else 0,
-            uint(msg.last_reply_seq, U32, "HelloReply.last_reply_seq"),
-            finite(msg.silence_timeout, "HelloReply.silence_timeout"),
-        )
-    if isinstance(msg, Command):
-        return FrameType.COMMAND, _encode_command(msg)
-    if isinstance(msg, Reply):
-        return FrameType.REPLY, b"".join(
-            (
-                _REPLY_HEAD.pack(
-                    uint(msg.reply_seq, U32, "Reply.reply_seq"),
-                    uint(msg.command_id, U32, "Reply.command_id"),
-                ),
-                _text(msg.kind, MAX_KIND_BYTES, "reply kind"),
-                _F64.pack(finite(msg.vehicle_time, "Reply.vehicle_time")),
-                _text(msg.detail, MAX_DETAIL_BYTES, "reply detail", empty=True),
+    encoder = _ENCODERS.get(type(msg))
+    if encoder is None:
+        # A subclass of a message encodes as the first message class it is an instance of.
+        for cls, candidate in _ENCODERS.items():
+            if isinstance(msg, cls):
+                encoder = candidate
+                break
+        else:
+            raise ProtocolError(
+                f"{type(msg).__name__} is not a stream message"
+                + (
+                    " (telemetry goes by datagram: use encode_datagram)"
+                    if isinstance(msg, TelemetryRecord)
+                    else ""
+                )
             )
-        )
-    if isinstance(msg, ReplyAck):
-        return FrameType.REPLY_ACK, _U32S.pack(uint(msg.reply_seq, U32, "ReplyAck.reply_seq"))
-    if isinstance(msg, MakeSafe):
-        return FrameType.MAKE_SAFE, _MAKE_SAFE_HEAD.pack(
-            uint(msg.request_id, U32, "MakeSafe.request_id"),
-            finite(msg.sent_at, "MakeSafe.sent_at"),
-        ) + _text(msg.reason, MAX_DETAIL_BYTES, "make-safe reason", empty=True)
-    if isinstance(msg, MakeSafeAck):
-        return FrameType.MAKE_SAFE_ACK, _MAKE_SAFE_ACK.pack(
-            uint(msg.request_id, U32, "MakeSafeAck.request_id"),
-            finite(msg.vehicle_time, "MakeSafeAck.vehicle_time"),
-            1 if msg.first else 0,
-        )
-    if isinstance(msg, Heartbeat):
-        return FrameType.HEARTBEAT, _F64.pack(finite(msg.sent_at, "Heartbeat.sent_at"))
-    raise ProtocolError(
-        f"{type(msg).__name__} is not a stream message"
-        + (
-            " (telemetry goes by datagram: use encode_datagram)"
-            if isinstance(msg, TelemetryRecord)
-            else ""
+    return encoder(msg)
+
+
+def _encode_hello(msg: Hello) -> tuple[FrameType, bytes]:
+    return _HELLO_TYPE, _HELLO.pack(
+        check_nonce(msg.nonce, "Hello.nonce"),
+        finite(msg.sent_at, "Hello.sent_at"),
+        uint(msg.mission_id, U64, "Hello.mission_id"),
+        1 if msg.resume else 0,
+        uint(msg.last_reply_seq, U32, "Hello.last_reply_seq"),
+        uint(msg.telemetry_port, U16, "Hello.telemetry_port"),
+    )
+
+
+def _encode_hello_reply(msg: HelloReply) -> tuple[FrameType, bytes]:
+    return _HELLO_REPLY_TYPE, _HELLO_REPLY.pack(
+        check_nonce(msg.controller_nonce, "HelloReply.controller_nonce"),
+        check_nonce(msg.vehicle_nonce, "HelloReply.vehicle_nonce"),
+        finite(msg.received_at, "HelloReply.received_at"),
+        finite(msg.sent_at, "HelloReply.sent_at"),
+        1 if msg.resumed else 0,
+        uint(msg.last_reply_seq, U32, "HelloReply.last_reply_seq"),
+        finite(msg.silence_timeout, "HelloReply.silence_timeout"),
+    )
+
+
+def _encode_command_frame(msg: Command) -> tuple[FrameType, bytes]:
+    return _COMMAND_TYPE, _encode_command(msg)
+
+
+def _encode_reply(msg: Reply) -> tuple[FrameType, bytes]:
+    return _REPLY_TYPE, b"".join(
+        (
+            _REPLY_HEAD.pack(
+                uint(msg.reply_seq, U32, "Reply.reply_seq"),
+                uint(msg.command_id, U32, "Reply.command_id"),
+            ),
+            _text(msg.kind, MAX_KIND_BYTES, "reply kind"),
+            _F64.pack(finite(msg.vehicle_time, "Reply.vehicle_time")),
+            _text(msg.detail, MAX_DETAIL_BYTES, "reply detail", empty=True),
         )
     )
+
+
+def _encode_reply_ack(msg: ReplyAck) -> tuple[FrameType, bytes]:
+    return _REPLY_ACK_TYPE, _U32S.pack(uint(msg.reply_seq, U32, "ReplyAck.reply_seq"))
+
+
+def _encode_make_safe(msg: MakeSafe) -> tuple[FrameType, bytes]:
+    return _MAKE_SAFE_TYPE, _MAKE_SAFE_HEAD.pack(
+        uint(msg.request_id, U32, "MakeSafe.request_id"),
+        finite(msg.sent_at, "MakeSafe.sent_at"),
+    ) + _text(msg.reason, MAX_DETAIL_BYTES, "make-safe reason", empty=True)
+
+
+def _encode_make_safe_ack(msg: MakeSafeAck) -> tuple[FrameType, bytes]:
+    return _MAKE_SAFE_ACK_TYPE, _MAKE_SAFE_ACK.pack(
+        uint(msg.request_id, U32, "MakeSafeAck.request_id"),
+        finite(msg.vehicle_time, "MakeSafeAck.vehicle_time"),
+        1 if msg.first else 0,
+    )
+
+
+def _encode_heartbeat(msg: Heartbeat) -> tuple[FrameType, bytes]:
+    return _HEARTBEAT_TYPE, _F64.pack(finite(msg.sent_at, "Heartbeat.sent_at"))
+
+
+# Looked up by the message's class: one dict lookup, not a chain of isinstance tests.
+_ENCODERS: dict[type, Callable[[Any], tuple[FrameType, bytes]]] = {
+    Hello: _encode_hello,
+    HelloReply: _encode_hello_reply,
+    Command: _encode_command_frame,
+    Reply: _encode_reply,
+    ReplyAck: _encode_reply_ack,
+    MakeSafe: _encode_make_safe,
+    MakeSafeAck: _encode_make_safe_ack,
+    Heartbeat: _encode_heartbeat,
+}
 
 
 def _encode_command(msg: Command) -> bytes:
@@ -244,58 +297,72 @@ def _finite_field(value: object, what: str) -> float:
 def decode_payload(ftype: FrameType, payload: bytes) -> StreamMessage:
     """The message in ``payload`` (of a known type); `Malformed` when it does not decode."""
     r = _Reader(payload)
-    msg: StreamMessage
-    if ftype is FrameType.HELLO:
-        nonce, sent_at, mission_id, resume, last_seq, port = r.unpack(_HELLO)
-        assert isinstance(nonce, bytes)
-        assert isinstance(mission_id, int) and isinstance(last_seq, int) and isinstance(port, int)
-        msg = Hello(
-            nonce,
-            _finite_field(sent_at, "sent_at"),
-            mission_id,
-            _flag(resume),
-            last_seq,
-            port,
-        )
-    elif ftype is FrameType.HELLO_REPLY:
-        c_nonce, v_nonce, received_at, sent_at, resumed, last_seq, silence = r.unpack(_HELLO_REPLY)
-        assert isinstance(c_nonce, bytes) and isinstance(v_nonce, bytes)
-        assert isinstance(last_seq, int)
-        msg = HelloReply(
-            c_nonce,
-            v_nonce,
-            _finite_field(received_at, "received_at"),
-            _finite_field(sent_at, "sent_at"),
-            _flag(resumed),
-            last_seq,
-            _finite_field(silence, "silence_timeout"),
-        )
-    elif ftype is FrameType.COMMAND:
-        msg = _decode_command(r)
-    elif ftype is FrameType.REPLY:
-        reply_seq, command_id = r.unpack(_REPLY_HEAD)
-        assert isinstance(reply_seq, int) and isinstance(command_id, int)
-        kind = r.text(MAX_KIND_BYTES, "reply kind")
-        vehicle_time = r.f64("vehicle_time")
-        detail = r.text(MAX_DETAIL_BYTES, "detail", empty=True)
-        msg = Reply(reply_seq, command_id, kind, vehicle_time, detail)
-    elif ftype is FrameType.REPLY_ACK:
-        (reply_seq,) = r.unpack(_U32S)
-        assert isinstance(reply_seq, int)
-        msg = ReplyAck(reply_seq)
-    elif ftype is FrameType.MAKE_SAFE:
-        request_id, asked_at = r.unpack(_MAKE_SAFE_HEAD)
-        assert isinstance(request_id, int)
-        reason = r.text(MAX_DETAIL_BYTES, "reason", empty=True)
-        msg = MakeSafe(request_id, _finite_field(asked_at, "sent_at"), reason)
-    elif ftype is FrameType.MAKE_SAFE_ACK:
-        request_id, safe_at, first = r.unpack(_MAKE_SAFE_ACK)
-        assert isinstance(request_id, int)
-        msg = MakeSafeAck(request_id, _finite_field(safe_at, "vehicle_time"), _flag(first))
-    else:  # FrameType.HEARTBEAT; the caller has checked the type
-        msg = Heartbeat(r.f64("sent_at"))
+    # Any type without a decoder of its own is read as a heartbeat: the caller has
+    # checked the type, and HEARTBEAT is the one left.
+    msg = _DECODERS.get(ftype, _decode_heartbeat)(r)
     r.end()
     return msg
+
+
+def _decode_hello(r: _Reader) -> Hello:
+    nonce, sent_at, mission_id, resume, last_seq, port = r.unpack(_HELLO)
+    assert isinstance(nonce, bytes)
+    assert isinstance(mission_id, int) and isinstance(last_seq, int) and isinstance(port, int)
+    return Hello(
+        nonce,
+        _finite_field(sent_at, "sent_at"),
+        mission_id,
+        _flag(resume),
+        last_seq,
+        port,
+    )
+
+
+def _decode_hello_reply(r: _Reader) -> HelloReply:
+    c_nonce, v_nonce, received_at, sent_at, resumed, last_seq, silence = r.unpack(_HELLO_REPLY)
+    assert isinstance(c_nonce, bytes) and isinstance(v_nonce, bytes)
+    assert isinstance(last_seq, int)
+    return HelloReply(
+        c_nonce,
+        v_nonce,
+        _finite_field(received_at, "received_at"),
+        _finite_field(sent_at, "sent_at"),
+        _flag(resumed),
+        last_seq,
+        _finite_field(silence, "silence_timeout"),
+    )
+
+
+def _decode_reply(r: _Reader) -> Reply:
+    reply_seq, command_id = r.unpack(_REPLY_HEAD)
+    assert isinstance(reply_seq, int) and isinstance(command_id, int)
+    kind = r.text(MAX_KIND_BYTES, "reply kind")
+    vehicle_time = r.f64("vehicle_time")
+    detail = r.text(MAX_DETAIL_BYTES, "detail", empty=True)
+    return Reply(reply_seq, command_id, kind, vehicle_time, detail)
+
+
+def _decode_reply_ack(r: _Reader) -> ReplyAck:
+    (reply_seq,) = r.unpack(_U32S)
+    assert isinstance(reply_seq, int)
+    return ReplyAck(reply_seq)
+
+
+def _decode_make_safe(r: _Reader) -> MakeSafe:
+    request_id, asked_at = r.unpack(_MAKE_SAFE_HEAD)
+    assert isinstance(request_id, int)
+    reason = r.text(MAX_DETAIL_BYTES, "reason", empty=True)
+    return MakeSafe(request_id, _finite_field(asked_at, "sent_at"), reason)
+
+
+def _decode_make_safe_ack(r: _Reader) -> MakeSafeAck:
+    request_id, safe_at, first = r.unpack(_MAKE_SAFE_ACK)
+    assert isinstance(request_id, int)
+    return MakeSafeAck(request_id, _finite_field(safe_at, "vehicle_time"), _flag(first))
+
+
+def _decode_heartbeat(r: _Reader) -> Heartbeat:
+    return Heartbeat(r.f64("sent_at"))
 
 
 def _decode_command(r: _Reader) -> Command:
@@ -322,6 +389,19 @@ def _decode_command(r: _Reader) -> Command:
         else:
             raise Malformed(f"parameter {pname!r} has unknown value type {kind}")
     return Command(command_id, name, _finite_field(sent_at, "sent_at"), params)
+
+
+# Looked up by frame type: one dict lookup, not a chain of comparisons.
+_DECODERS: dict[FrameType, Callable[[_Reader], StreamMessage]] = {
+    FrameType.HELLO: _decode_hello,
+    FrameType.HELLO_REPLY: _decode_hello_reply,
+    FrameType.COMMAND: _decode_command,
+    FrameType.REPLY: _decode_reply,
+    FrameType.REPLY_ACK: _decode_reply_ack,
+    FrameType.MAKE_SAFE: _decode_make_safe,
+    FrameType.MAKE_SAFE_ACK: _decode_make_safe_ack,
+    FrameType.HEARTBEAT: _decode_heartbeat,
+}
 
 
 def frame_size(msg: StreamMessage) -> int:
