@@ -26,6 +26,8 @@ The package, one module per job:
 * `runtime.fuzz.one_run`: one run (`FuzzOptions`, `FuzzRun`, `run_one`);
 * `runtime.fuzz.campaign`: many runs and what they add up to (`fuzz`, `FuzzReport`,
   `Coverage`);
+* `runtime.fuzz.on_ray`: the runs as tasks on a Ray cluster (`RayTarget`, `RayError`;
+  Ray itself is imported only when used);
 * `runtime.fuzz.report`: the text report, the histogram, a replay, the progress bar;
 * `runtime.fuzz.approval`: the certificate gate (`approval_for`, `UNVERIFIED`);
 * `runtime.fuzz.options`: the command's options (`add_fuzz_arguments`), importing no
@@ -53,6 +55,7 @@ if TYPE_CHECKING:
         predicted_deadlocks,
     )
     from runtime.fuzz.cli import add_fuzz_arguments, build_parser, main, run_fuzz
+    from runtime.fuzz.on_ray import RayError, RayTarget
     from runtime.fuzz.one_run import (
         PSK,
         SEED_LIMIT,
@@ -89,6 +92,8 @@ __all__ = [
     "NeverFired",
     "Progress",
     "ProgressBar",
+    "RayError",
+    "RayTarget",
     "add_fuzz_arguments",
     "approval_for",
     "build_parser",
@@ -118,6 +123,8 @@ _HOMES = {
     "Progress": "runtime.fuzz.campaign",
     "ProgressBar": "runtime.fuzz.report",
     "REPORT_JSON": "runtime.fuzz.report",
+    "RayError": "runtime.fuzz.on_ray",
+    "RayTarget": "runtime.fuzz.on_ray",
     "SEED_LIMIT": "runtime.fuzz.one_run",
     "UNVERIFIED": "runtime.fuzz.approval",
     "add_fuzz_arguments": "runtime.fuzz.cli",

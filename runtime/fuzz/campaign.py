@@ -1,10 +1,11 @@
 """Many fuzz runs: run ``i`` of ``--seed S`` has run seed ``S + i``, and what they add up to.
 
-`fuzz` runs a campaign (Ctrl-C stops it early, keeping the runs so far); `FuzzReport`
-holds the runs and the figures drawn from them: the share that reached a declared final
-marking, the virtual mission times, which of the net's transitions the runs fired
-(`Coverage`, with the branches never rehearsed as `NeverFired`), and, for deadlocked
-runs, whether analysis predicts their dead marking.
+`fuzz` runs a campaign, in this process, in local worker processes or on a Ray cluster
+(`runtime.fuzz.on_ray`), the same runs wherever (Ctrl-C stops it early, keeping the runs
+so far); `FuzzReport` holds the runs and the figures drawn from them: the share that
+reached a declared final marking, the virtual mission times, which of the net's
+transitions the runs fired (`Coverage`, with the branches never rehearsed as
+`NeverFired`), and, for deadlocked runs, whether analysis predicts their dead marking.
 """
 
 from __future__ import annotations
@@ -18,11 +19,15 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from analysis.certificate import CertificateCheck
 from coral_lang.net import Net, TransitionKind
 from runtime.controller import RunEnd
 from runtime.fuzz.one_run import FuzzOptions, FuzzRun, run_one, run_seed
+
+if TYPE_CHECKING:
+    from runtime.fuzz.on_ray import RayTarget, ReplayMismatch
 
 __all__ = [
     "Coverage",
@@ -179,6 +184,10 @@ class FuzzReport:
     """The dead markings analysis finds (None: not explored, or too large to explore)."""
     net: Net | None = field(default=None, repr=False)
     """The mission's net, for `coverage` (None: no coverage reported)."""
+    ran_on: str = ""
+    """Where the runs ran, e.g. ``in 2 local processes``, ``on Ray at HOST:PORT (8 CPUs)``."""
+    mismatches: list[ReplayMismatch] = field(default_factory=list)
+    """Failed runs whose re-run for their log did something else (Ray only; a bug)."""
 
     @property
     def failures(self) -> list[FuzzRun]:
@@ -252,6 +261,8 @@ class FuzzReport:
             "schedules_per_second": self.schedules_per_second,
             "coverage": None if coverage is None else coverage.to_json(),
             "link_bound": self.link_bound().to_json(),
+            "ran_on": self.ran_on,
+            "nondeterministic": [m.to_json() for m in self.mismatches],
         }
 
 
@@ -274,6 +285,7 @@ def fuzz(
     failed_logs: Path | None = None,
     progress: Progress | None = None,
     workers: int = 1,
+    ray: RayTarget | None = None,
 ) -> FuzzReport:
     """Run ``options.runs`` runs of ``net``; Ctrl-C stops early with the runs so far.
 
@@ -283,12 +295,40 @@ def fuzz(
         workers: local processes to run them in (1: in this process). A run depends on
             its run seed alone, so the report lists the same runs in the same order
             whatever the number of workers; only wall times differ.
+        ray: run them as tasks on a Ray cluster instead (`runtime.fuzz.on_ray`; needs
+            the ``ray`` extra); the same report again. ``workers`` must then be 1: a
+            local cluster's size is ``RayTarget.cpus``.
+
+    Raises:
+        ValueError: both ``workers`` > 1 and ``ray``.
+        runtime.fuzz.on_ray.RayError: Ray missing, unreachable, or a run lost for good.
     """
+    if ray is not None and workers > 1:
+        raise ValueError("fuzz: give workers or ray, not both (RayTarget.cpus sizes a cluster)")
     started = time.perf_counter()
     runs: list[FuzzRun] = []
     interrupted = False
+    ran_on = "in this process" if workers <= 1 or options.runs <= 1 else ""
+    mismatches: list[ReplayMismatch] = []
     try:
-        if workers <= 1 or options.runs <= 1:
+        if ray is not None:
+            from runtime.fuzz.on_ray import RayCampaign, run_on_ray
+
+            campaign = RayCampaign()
+            try:
+                run_on_ray(
+                    net,
+                    approval,
+                    options,
+                    ray,
+                    runs,
+                    campaign,
+                    failed_logs=failed_logs,
+                    progress=progress,
+                )
+            finally:
+                ran_on, mismatches = campaign.where, campaign.mismatches
+        elif workers <= 1 or options.runs <= 1:
             for index in range(options.runs):
                 seed = run_seed(options.seed, index)
                 runs.append(
@@ -297,6 +337,7 @@ def fuzz(
                 if progress is not None:
                     progress(index + 1, options.runs, sum(not r.ok for r in runs))
         else:
+            ran_on = f"in {min(workers, options.runs)} local processes"
             _in_workers(net, approval, options, failed_logs, progress, workers, runs)
     except KeyboardInterrupt:
         interrupted = True
@@ -309,6 +350,8 @@ def fuzz(
         wall_seconds=time.perf_counter() - started,
         interrupted=interrupted,
         net=net,
+        ran_on=ran_on,
+        mismatches=mismatches,
     )
     if any(r.end is RunEnd.DEADLOCK for r in runs):
         report.predicted_deadlocks = predicted_deadlocks(net)

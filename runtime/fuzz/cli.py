@@ -23,7 +23,7 @@ import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import IO
+from typing import IO, TYPE_CHECKING
 
 from coral_lang.cliframe import EXIT_FAILED, EXIT_OK, EXIT_USAGE, run_main
 from coral_lang.diagnostics import CoralError
@@ -31,7 +31,14 @@ from runtime.engine import Policy
 from runtime.fuzz.approval import approval_for
 from runtime.fuzz.campaign import fuzz
 from runtime.fuzz.one_run import FuzzOptions, make_vehicle, run_one
-from runtime.fuzz.options import DESCRIPTION, EPILOG, PROG, add_fuzz_arguments, build_parser
+from runtime.fuzz.options import (
+    DESCRIPTION,
+    EPILOG,
+    LOCAL_RAY,
+    PROG,
+    add_fuzz_arguments,
+    build_parser,
+)
 from runtime.fuzz.report import (
     FAILURES_DIR,
     HISTOGRAM,
@@ -43,6 +50,9 @@ from runtime.fuzz.report import (
 )
 from runtime.link import load_link_profile
 from runtime.vehicle.options import fault_plan_from_args
+
+if TYPE_CHECKING:
+    from runtime.fuzz.on_ray import RayTarget
 
 __all__ = [
     "DESCRIPTION",
@@ -88,6 +98,7 @@ def _fuzz(options: argparse.Namespace, err: IO[str]) -> int:
     from coral_lang.profile import load_profile
     from runtime.faultplan import parse_fault_rules
 
+    ray_target = _ray_target(options, err)
     mission = Path(options.mission)
     compiled = load_mission(
         mission,
@@ -148,7 +159,8 @@ def _fuzz(options: argparse.Namespace, err: IO[str]) -> int:
             mission_path=str(mission),
             failed_logs=out / FAILURES_DIR,
             progress=bar,
-            workers=options.workers or os.cpu_count() or 1,
+            workers=1 if ray_target is not None else options.workers or os.cpu_count() or 1,
+            ray=ray_target,
         )
     finally:
         bar.close()
@@ -157,11 +169,34 @@ def _fuzz(options: argparse.Namespace, err: IO[str]) -> int:
     print(f"coral-run fuzz: wrote {out / REPORT_JSON}")
     if not options.no_plot and report.runs:
         print(f"coral-run fuzz: wrote {plot_histogram(report, out / HISTOGRAM)}")
-    if report.failures:
+    if any(run.log is not None for run in report.failures):
         print(f"coral-run fuzz: logs of failed runs in {out / FAILURES_DIR}/")
     if report.interrupted:
         return EXIT_FAILED
     return EXIT_OK if not report.failures else EXIT_FAILED
+
+
+def _ray_target(options: argparse.Namespace, err: IO[str]) -> RayTarget | None:
+    """Where ``--ray`` asks the campaign to run (None: not on Ray), Ray imported now so
+    that a missing extra is said before anything runs.
+
+    Raises:
+        RayError: ``--ray`` without Ray installed, or with both ADDRESS and --workers.
+    """
+    if options.ray is None:
+        return None
+    if options.replay is not None:
+        print("coral-run fuzz: --replay runs here, not on Ray", file=err)
+        return None
+    from runtime.fuzz.on_ray import RayError, RayTarget, import_ray
+
+    address = None if options.ray == LOCAL_RAY else options.ray
+    if address is not None and options.workers is not None:
+        raise RayError(
+            f"--workers sizes a local Ray cluster; the cluster at {address} has its own CPUs"
+        )
+    import_ray()
+    return RayTarget(address=address, cpus=options.workers)
 
 
 def _command(options: argparse.Namespace) -> str:

@@ -27,7 +27,7 @@ from runtime.vehicle.options import (
     seed_number,
 )
 
-__all__ = ["DESCRIPTION", "EPILOG", "PROG", "add_fuzz_arguments", "build_parser"]
+__all__ = ["DESCRIPTION", "EPILOG", "LOCAL_RAY", "PROG", "add_fuzz_arguments", "build_parser"]
 
 PROG = "coral-run fuzz"
 DESCRIPTION = (
@@ -38,6 +38,9 @@ DESCRIPTION = (
     "which transitions of the net it exercised, and the seed that replays each "
     "failure. Only a simulator is ever used."
 )
+LOCAL_RAY = ""
+"""``--ray`` without an address: a local Ray cluster, started for the campaign."""
+RAY_EXTRA_HINT = "pip install 'coral[ray]'"  # runtime.fuzz.on_ray.RAY_EXTRA, not imported here
 EPILOG = (
     "exit codes: 0 every run reached a declared final marking, 1 some run did not, "
     "2 bad usage or input"
@@ -139,7 +142,19 @@ def add_fuzz_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="N",
         help="run the campaign in N local processes (default: one per core); the "
-        "report is the same whatever N",
+        "report is the same whatever N; with --ray and no ADDRESS, the local Ray "
+        "cluster's CPUs",
+    )
+    parser.add_argument(
+        "--ray",
+        nargs="?",
+        const=LOCAL_RAY,
+        default=None,
+        metavar="ADDRESS",
+        help="run the campaign on a Ray cluster: its head's HOST:PORT (as 'ray start "
+        "--head' prints it), 'auto' for the one started on this machine, or no ADDRESS "
+        "for a local cluster started for this campaign; the same report as without "
+        f"(docs/fuzz.md, 'On a Ray cluster'; needs {RAY_EXTRA_HINT})",
     )
     parser.add_argument("--no-plot", action="store_true", help="do not draw the histogram")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")

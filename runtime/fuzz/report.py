@@ -82,8 +82,20 @@ def format_report(report: FuzzReport, command: str) -> str:
             lines.append(f"      {command} --replay {run.seed}")
         if len(failures) > 20:
             lines.append(f"    ... and {len(failures) - 20} more in {REPORT_JSON}")
+    if report.mismatches:
+        lines.append(
+            f"  NOT REPRODUCIBLE ({len(report.mismatches)}): failed runs that did something "
+            "else when run again here to keep their logs; a run must depend on its run seed "
+            "alone, so this is a bug: please report it"
+        )
+        for mismatch in report.mismatches:
+            lines.append(
+                f"    seed {mismatch.seed}: events {mismatch.worker_digest} on the worker, "
+                f"{mismatch.driver_digest} here (the log kept is this re-run)"
+            )
     lines.append(
         f"  {report.wall_seconds:.1f} s wall, {report.schedules_per_second:.2f} schedules/s"
+        + (f", {report.ran_on}" if report.ran_on else "")
     )
     return "\n".join(lines)
 
