@@ -34,12 +34,18 @@ import tempfile
 import time
 from pathlib import Path
 
-from analysis.certificate import check_certificate, make_certificate, write_certificate
+from analysis.certificate import (
+    CertificateCheck,
+    check_certificate,
+    make_certificate,
+    write_certificate,
+)
 from analysis.verify import verify
 from coral_lang.cliframe import positive_int
 from coral_lang.compiler import compile_mission
+from coral_lang.net import Net
 from runtime.engine import Engine, Outcome, Policy
-from runtime.fuzz import FuzzOptions, fuzz
+from runtime.fuzz import FuzzOptions, FuzzReport, fuzz
 from runtime.link import load_link_profile
 from runtime.schedule import MessageFate, Outage, Schedule, Timing, run_schedule
 
@@ -106,6 +112,30 @@ def before_and_after(before: Path, runs: int, seed: int, link: str, rounds: int)
     )
 
 
+def _on_ray(
+    net: Net, approval: CertificateCheck, options: FuzzOptions, cpus: int
+) -> list[tuple[str, FuzzReport, float]]:
+    """The campaign on a local Ray cluster of ``cpus``: started for it (its start and stop
+    in the wall time, as for ``coral-run fuzz --ray``), then on one already running."""
+    import ray
+
+    from runtime.fuzz import RayTarget
+
+    rows = []
+    cpu = time.process_time()
+    report = fuzz(net, approval, options, ray=RayTarget(address=None, cpus=cpus))
+    rows.append((f"ray {cpus}", report, time.process_time() - cpu))
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    ray.init(num_cpus=cpus, include_dashboard=False, log_to_driver=False)
+    try:
+        cpu = time.process_time()
+        report = fuzz(net, approval, options, ray=RayTarget(address=None, cpus=cpus))
+        rows.append((f"ray {cpus}+", report, time.process_time() - cpu))
+    finally:
+        ray.shutdown()
+    return rows
+
+
 def random_schedule(rng: random.Random) -> Schedule:
     """A schedule like `runtime.schedule_strategies.schedules` draws, from ``rng``."""
     messages = tuple(
@@ -142,6 +172,16 @@ def main(argv: list[str] | None = None) -> int:
         help="campaigns side by side with these numbers of local worker processes (default 1 2)",
     )
     parser.add_argument(
+        "--ray",
+        type=positive_int,
+        nargs="*",
+        default=[],
+        metavar="CPUS",
+        help="also on a local Ray cluster of CPUS (e.g. --ray 2; needs the ray extra): once "
+        "with the cluster started for the campaign, as coral-run fuzz --ray does, once "
+        "with it already running",
+    )
+    parser.add_argument(
         "--engine-schedules",
         type=positive_int,
         default=2000,
@@ -175,19 +215,25 @@ def main(argv: list[str] | None = None) -> int:
     )
     report = None
     first = None
-    for workers in args.workers:
-        cpu = time.process_time()
-        report = fuzz(net, approval, options, workers=workers)
-        cpu = time.process_time() - cpu
-        durations = [r.duration for r in report.runs]
-        runs = [(r.seed, r.end, r.events_digest) for r in report.runs]
-        first = runs if first is None else first
-        reached = len(report.runs) - len(report.failures)
-        print(
-            f"  {workers:>7} {len(report.runs):>5} {report.wall_seconds:>8.2f} {cpu:>21.2f} "
-            f"{report.schedules_per_second:>12.2f} {statistics.median(durations):>17.1f} "
-            f"{reached:>3}/{len(report.runs):<3}  {'yes' if runs == first else 'NO'}"
-        )
+    setups: list[tuple[str, int, bool]] = [(str(w), w, False) for w in args.workers]
+    setups += [(f"ray {c}", c, True) for c in args.ray]
+    for label, workers, on_ray in setups:
+        if on_ray:
+            rows = _on_ray(net, approval, options, workers)
+        else:
+            cpu = time.process_time()
+            report = fuzz(net, approval, options, workers=workers)
+            rows = [(label, report, time.process_time() - cpu)]
+        for name, report, cpu in rows:
+            durations = [r.duration for r in report.runs]
+            runs = [(r.seed, r.end, r.events_digest) for r in report.runs]
+            first = runs if first is None else first
+            reached = len(report.runs) - len(report.failures)
+            print(
+                f"  {name:>7} {len(report.runs):>5} {report.wall_seconds:>8.2f} {cpu:>21.2f} "
+                f"{report.schedules_per_second:>12.2f} {statistics.median(durations):>17.1f} "
+                f"{reached:>3}/{len(report.runs):<3}  {'yes' if runs == first else 'NO'}"
+            )
     assert report is not None
 
     rng = random.Random(args.seed)
