@@ -162,13 +162,8 @@ class EventLog:
                 full, or ``meta`` holds something JSON cannot.
         """
         target = Path(path)
-        if role not in _ROLES:
-            raise EventLogError(f"{target}: role must be 'controller' or 'vehicle', not {role!r}")
+        header = cls._new_header(target, role, mission, meta, net_json, net_digest)
         key = check_log_key(target, mac_key)
-        try:
-            meta_json = dumps_strict(jsonable(dict(meta), "meta"))
-        except NotJson as bad:
-            raise bad.error(f"{target}: ") from None
         try:
             # O_EXCL: refuse an existing file atomically, even against a racing creator.
             fd = os.open(target, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600)
@@ -187,8 +182,6 @@ class EventLog:
                 os.close(fd)
             target.unlink(missing_ok=True)
             raise
-        created = dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
-        header = (role, mission, created, meta_json, net_json, net_digest)
         auth: tuple[str | None, str | None] = (None, None)
         mac = b""
         if key is not None:
@@ -236,14 +229,7 @@ class EventLog:
             EventLogError: ``meta`` holds something JSON cannot.
         """
         target = Path(name)
-        if role not in _ROLES:
-            raise EventLogError(f"{target}: role must be 'controller' or 'vehicle', not {role!r}")
-        try:
-            meta_json = dumps_strict(jsonable(dict(meta), "meta"))
-        except NotJson as bad:
-            raise bad.error(f"{target}: ") from None
-        created = dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
-        header = (role, mission, created, meta_json, net_json, net_digest)
+        header = cls._new_header(target, role, mission, meta, net_json, net_digest)
         db = cls._connect(":memory:", writable=True)
         try:
             cls._initialise(db, header, (None, None))
@@ -289,6 +275,25 @@ class EventLog:
             raise EventLogError(f"{target}: cannot write a copy of the log: {error}") from None
         finally:
             os.close(fd)
+
+    @staticmethod
+    def _new_header(
+        target: Path,
+        role: LogRole,
+        mission: str,
+        meta: Mapping[str, object],
+        net_json: str | None,
+        net_digest: str | None,
+    ) -> tuple[object, ...]:
+        """A new log's header fields, stamped now (`EventLogError`: a bad role or meta)."""
+        if role not in _ROLES:
+            raise EventLogError(f"{target}: role must be 'controller' or 'vehicle', not {role!r}")
+        try:
+            meta_json = dumps_strict(jsonable(dict(meta), "meta"))
+        except NotJson as bad:
+            raise bad.error(f"{target}: ") from None
+        created = dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        return (role, mission, created, meta_json, net_json, net_digest)
 
     @staticmethod
     def _initialise(

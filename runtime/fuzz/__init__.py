@@ -29,7 +29,8 @@ The package, one module per job:
 * `runtime.fuzz.on_ray`: the runs as tasks on a Ray cluster (`RayTarget`, `RayError`;
   Ray itself is imported only when used);
 * `runtime.fuzz.report`: the text report, the histogram, a replay, the progress bar;
-* `runtime.fuzz.approval`: the certificate gate (`approval_for`, `UNVERIFIED`);
+* `runtime.fuzz.approval`: the certificate gate (`approval_for`, `UNVERIFIED`,
+  `unverified_approval`);
 * `runtime.fuzz.options`: the command's options (`add_fuzz_arguments`), importing no
   part of a campaign, so ``coral-run`` lists ``fuzz`` without loading one;
 * `runtime.fuzz.cli`: the command on the shared CLI frame (`run_fuzz`, `main`).
@@ -45,7 +46,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from runtime.fuzz.approval import UNVERIFIED, approval_for
+    from runtime.fuzz.approval import UNVERIFIED, approval_for, unverified_approval
     from runtime.fuzz.campaign import (
         Coverage,
         FuzzReport,
@@ -108,6 +109,7 @@ __all__ = [
     "run_fuzz",
     "run_one",
     "run_seed",
+    "unverified_approval",
 ]
 
 _HOMES = {
@@ -129,6 +131,7 @@ _HOMES = {
     "UNVERIFIED": "runtime.fuzz.approval",
     "add_fuzz_arguments": "runtime.fuzz.cli",
     "approval_for": "runtime.fuzz.approval",
+    "unverified_approval": "runtime.fuzz.approval",
     "build_parser": "runtime.fuzz.cli",
     "events_digest": "runtime.fuzz.one_run",
     "format_replay": "runtime.fuzz.report",

@@ -13,8 +13,9 @@ from coral_lang.mission import Mission
 
 if TYPE_CHECKING:
     from analysis.signing import TrustStore
+    from coral_lang.net import Net
 
-__all__ = ["UNVERIFIED", "approval_for"]
+__all__ = ["UNVERIFIED", "approval_for", "unverified_approval"]
 
 UNVERIFIED = "unverified (fuzz only)"
 """The ``path`` of the approval `--unverified` builds: it names no file, so it can never
@@ -47,9 +48,13 @@ def approval_for(
             raise CertificateError(
                 f"{exc}; or, to fuzz it as it is against the simulator, add --unverified"
             ) from None
-        from analysis.certificate import tool_version
+        return unverified_approval(net), str(exc)
 
-        approval = CertificateCheck(
-            path=UNVERIFIED, net_digest=net.digest(), issued="", tool_version=tool_version()
-        )
-        return approval, str(exc)
+
+def unverified_approval(net: Net) -> CertificateCheck:
+    """The approval ``--unverified`` runs ``net`` under: named `UNVERIFIED`, no file."""
+    from analysis.certificate import tool_version
+
+    return CertificateCheck(
+        path=UNVERIFIED, net_digest=net.digest(), issued="", tool_version=tool_version()
+    )

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING
 from analysis.certificate import CertificateCheck
 from coral_lang.diagnostics import CoralError
 from coral_lang.net import Net
-from runtime.fuzz.one_run import FuzzOptions, FuzzRun, run_one, run_seed
+from runtime.fuzz.one_run import FuzzOptions, FuzzRun, failed_log_path, run_one, run_seed
 
 if TYPE_CHECKING:
     from types import ModuleType
@@ -374,9 +374,7 @@ def _keep_failed_logs(
         run = runs[position]
         if run.ok:
             continue
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / f"seed-{run.seed}.sqlite"
-        path.unlink(missing_ok=True)
+        path = failed_log_path(folder, run.seed)
         again = run_one(net, approval, run.seed, options, index=run.index, keep_log=path)
         runs[position] = dataclasses.replace(run, log=path)
         if again.events_digest != run.events_digest:

@@ -59,6 +59,7 @@ __all__ = [
     "FuzzOptions",
     "FuzzRun",
     "events_digest",
+    "failed_log_path",
     "make_vehicle",
     "run_one",
     "run_seed",
@@ -306,9 +307,7 @@ def run_one(
         )
         digest, fired, events = _read_events(log, keep_events)
         if keep_log is None and keep_failed_logs is not None and result.end is not RunEnd.FINAL:
-            keep_failed_logs.mkdir(parents=True, exist_ok=True)
-            kept = keep_failed_logs / f"seed-{seed}.sqlite"
-            kept.unlink(missing_ok=True)
+            kept = failed_log_path(keep_failed_logs, seed)
             log.commit()  # what close would add, so the copy is the log a file would be
             log.save_copy(kept)
     finally:
@@ -336,6 +335,15 @@ def run_one(
         over_bound=emulator.over_bound,
         longest_delay=emulator.longest_delay,
     )
+
+
+def failed_log_path(folder: Path, seed: int) -> Path:
+    """Where a failed run's log is kept: ``FOLDER/seed-SEED.sqlite``, the folder made and
+    an older log of the same seed removed (a log is never overwritten in place)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"seed-{seed}.sqlite"
+    path.unlink(missing_ok=True)
+    return path
 
 
 def _open_log(

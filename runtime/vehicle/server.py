@@ -622,9 +622,8 @@ class VehicleServer(Generic[M]):
         Telemetry samples are taken on the way, every ``1 / telemetry_hz`` vehicle seconds.
         """
         now = self._clock()
-        elapsed = max(0.0, now - self._last_wall)
+        target = self._target(now)
         self._last_wall = now
-        target = self.vehicle.time + elapsed * self.speed
         replies: list[Reply] = []
         while self._next_sample <= target:
             replies += self.vehicle.advance_to(max(self._next_sample, self.vehicle.time))
@@ -693,11 +692,11 @@ class VehicleServer(Generic[M]):
             after = at + tick
             if when >= horizon - _QUIET_MARGIN or now + (after - now) != at + (after - at):
                 break  # another timer first, or the loop could not land on the tick after
-            if not self._quiet_at(at):
+            target = self._quiet_target(at)
+            if target is None:
                 break
-            elapsed = max(0.0, at - self._last_wall)
             self._last_wall = at
-            self._held = self.vehicle.advance_to(self.vehicle.time + elapsed * self.speed)
+            self._held = self.vehicle.advance_to(target)
             taken += 1
             if self._held:
                 break  # wake at this tick to send them
@@ -712,19 +711,26 @@ class VehicleServer(Generic[M]):
             handle.cancel()
         return True
 
-    def _quiet_at(self, at: float) -> bool:
-        """Whether a tick at clock reading ``at`` would only step the vehicle."""
-        target = self.vehicle.time + max(0.0, at - self._last_wall) * self.speed
+    def _target(self, now: float) -> float:
+        """The vehicle time a tick at clock reading ``now`` advances the vehicle to."""
+        return self.vehicle.time + max(0.0, now - self._last_wall) * self.speed
+
+    def _quiet_target(self, at: float) -> float | None:
+        """`_target` of a tick at clock reading ``at``, if that tick would only step the
+        vehicle (no telemetry sample, log line, heartbeat or log commit due); else None."""
+        target = self._target(at)
         if self._next_sample <= target or self._throttled.pending:
-            return False
+            return None
         active = self._active
         if (
             active is not None
             and not active.closed
             and at - active.last_sent >= self._heartbeat_interval
         ):
-            return False
-        return self._events is None or at - self._last_commit < 1.0
+            return None
+        if self._events is not None and at - self._last_commit >= 1.0:
+            return None
+        return target
 
     def _record_sample(self, t: TelemetryRecord) -> None:
         if self._events is None:

@@ -26,7 +26,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from analysis.certificate import CertificateCheck, tool_version
+from analysis.certificate import CertificateCheck
 from analysis.report import Verdict
 from analysis.timed import TimedOptions, TimedReport, analyse_timed
 from coral_lang.compiler import compile_file
@@ -34,7 +34,7 @@ from coral_lang.linkprofile import load_link_profile
 from coral_lang.net import Net, PlaceKind
 from coral_lang.profile import VehicleProfile
 from runtime.controller import RunEnd
-from runtime.fuzz import UNVERIFIED, FuzzOptions, FuzzRun, run_one
+from runtime.fuzz import FuzzOptions, FuzzRun, run_one, unverified_approval
 from tests.analysis.timed.missions import EPS, TimedMission, stuck_set, timed_missions
 from tests.conftest import EXAMPLES
 
@@ -45,9 +45,7 @@ POOL = EXAMPLES / "pool_mission" / "pool_mission.coral"
 
 def approval(net: Net) -> CertificateCheck:
     """The approval ``coral-run fuzz --unverified`` builds: these runs are simulated."""
-    return CertificateCheck(
-        path=UNVERIFIED, net_digest=net.digest(), issued="", tool_version=tool_version()
-    )
+    return unverified_approval(net)
 
 
 def analyse(net: Net, profile: VehicleProfile) -> TimedReport:

@@ -18,13 +18,12 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from analysis.certificate import CertificateCheck, tool_version
 from coral_lang.compiler import compile_mission
 from coral_lang.net import Net
 from coral_lang.profile import load_profile
 from runtime.engine import Policy
 from runtime.faultplan import parse_fault_rules
-from runtime.fuzz import UNVERIFIED, FuzzOptions, run_one
+from runtime.fuzz import FuzzOptions, run_one, unverified_approval
 from runtime.link import load_link_profile
 
 REPO = Path(__file__).resolve().parents[3]
@@ -100,9 +99,7 @@ def outcomes(scenario: Scenario) -> dict[str, list[str]]:
     part of a run's events, and the racy mission has no certificate to give.
     """
     net = net_of(scenario)
-    approval = CertificateCheck(
-        path=UNVERIFIED, net_digest=net.digest(), issued="", tool_version=tool_version()
-    )
+    approval = unverified_approval(net)
     options = options_of(scenario)
     result: dict[str, list[str]] = {}
     for seed in scenario.seeds:
