@@ -30,7 +30,7 @@ from analysis.budget import Budget, stage
 from analysis.inputs import legal_trace
 from analysis.invariants import InvariantBasis
 from analysis.siphons import maximal_trap
-from analysis.structural import DEFAULT_QUERY_SECONDS, TooLargeForStructure, incidence
+from analysis.structural import DEFAULT_QUERY_SECONDS
 from coral_lang.net import Net, Transition, TransitionKind
 
 if TYPE_CHECKING:
@@ -293,18 +293,14 @@ def check_unreachable(
 
     Returns:
         `Proven` (unsat: no bad marking is reachable), `Candidate` (a solution that
-        still needs confirming), or `Unknown` (z3 gave up or a limit was hit, or the net
-        is too large for the dense incidence matrix: `TooLargeForStructure`).
+        still needs confirming), or `Unknown` (z3 gave up or a limit was hit).
     """
     import z3
 
     if invariants is not None and invariants.kind != "P":
         raise ValueError("the state equation is strengthened with P-invariants only")
     budget = stage(budget, DEFAULT_TIME_LIMIT)
-    try:
-        solver, marking, counts = _equation(net, bad, invariants)
-    except TooLargeForStructure as exc:
-        return Unknown(bad=bad, reason=str(exc), method=METHOD)
+    solver, marking, counts = _equation(net, bad, invariants)
     traps: list[tuple[str, ...]] = []
     rounds = 0
     while True:
@@ -374,20 +370,35 @@ def realise(net: Net, candidate: Candidate, max_nodes: int = 100_000) -> tuple[i
     return None
 
 
+def _sparse_rows(net: Net) -> list[dict[int, int]]:
+    """Row p of the incidence matrix as ``{t: C[p, t]}`` from the arcs (Python ints,
+    exact): the equation has one term per arc, so it never needs the dense places x
+    transitions matrix, which past tens of millions of cells would not fit in memory."""
+    rows: list[dict[int, int]] = [{} for _ in net.places]
+    for t, tr in enumerate(net.transitions):
+        for name, w in tr.inputs:
+            row = rows[net.place_index(name)]
+            row[t] = row.get(t, 0) - w
+        for name, w in tr.outputs:
+            row = rows[net.place_index(name)]
+            row[t] = row.get(t, 0) + w
+    return rows
+
+
 def _equation(
     net: Net, bad: BadMarkings, invariants: InvariantBasis | None
 ) -> tuple[z3.Solver, list[z3.ArithRef], list[z3.ArithRef]]:
     """The solver with M = M0 + C x, x >= 0, M >= 0, invariants and the bad set."""
     import z3
 
-    rows = incidence(net).rows()
+    rows = _sparse_rows(net)
     m0 = net.initial_marking()
     counts = [z3.Int(f"x_{t}") for t in range(len(net.transitions))]
     marking = [z3.Int(f"m_{p}") for p in range(len(net.places))]
     solver = z3.Solver()
     solver.add(*[x >= 0 for x in counts], *[m >= 0 for m in marking])
     for p, row in enumerate(rows):
-        flow = [c * counts[t] for t, c in enumerate(row) if c]
+        flow = [c * counts[t] for t, c in sorted(row.items()) if c]
         solver.add(marking[p] == m0[p] + z3.Sum(flow) if flow else marking[p] == m0[p])
     if invariants is not None:
         for inv in invariants.invariants:

@@ -78,7 +78,6 @@ COVERABILITY_SECONDS = 10.0
 PAIR_SECONDS = 10.0  # each state-equation proof that two resources never meet
 UNBOUNDED_STATES = 20_000
 REALISE_NODES = 20_000  # firing orders tried to turn a state-equation solution into a trace
-DENSE_CELL_LIMIT = 25_000_000  # places x transitions the dense encodings accept (~200 MB)
 UNBOUNDED_SECONDS = 3.0
 EXPLICIT_POR = "explicit state space (stubborn-set reduced)"
 TIMED = "timed analysis (zones)"
@@ -176,9 +175,6 @@ def run_verification(
     options = options or VerifyOptions()
     budget = budget or Budget()
     started = budget.clock()
-    cells = len(net.places) * len(net.transitions)
-    if cells > DENSE_CELL_LIMIT:
-        return Verification(_too_large(net, cells, budget.clock() - started), None)
     checker = _Checker(net, options, budget)
     properties = [
         checker.bounded(),
@@ -205,38 +201,6 @@ def run_verification(
         timed=timed,
     )
     return Verification(report, checker.space)
-
-
-def _too_large(net: Net, cells: int, seconds: float) -> Report:
-    """Every property inconclusive, saying why: the encodings are dense in places x
-    transitions, and past the limit they would exhaust memory rather than answer."""
-    reason = (
-        f"not analysed: {len(net.places)} places x {len(net.transitions)} transitions = "
-        f"{cells:,} cells, over the {DENSE_CELL_LIMIT:,}-cell limit of the dense "
-        "encodings; split the mission into phases and verify each"
-    )
-    keys = [("bounded", "the net is bounded"), ("deadlock", "no deadlock")]
-    return Report(
-        net_name=net.name,
-        digest=net.digest(),
-        sources=net.sources,
-        statespace=StateSpaceFigures(
-            states=0,
-            edges=0,
-            max_tokens_place=0,
-            max_tokens_marking=0,
-            place_bounds={},
-            complete=False,
-            stopped_reason=reason,
-            reduced=False,
-            seconds=0.0,
-            bytes_per_state=0.0,
-        ),
-        properties=[
-            PropertyResult(key, title, Verdict.INCONCLUSIVE, "none", reason) for key, title in keys
-        ],
-        seconds=seconds,
-    )
 
 
 class _Checker:

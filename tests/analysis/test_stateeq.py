@@ -234,11 +234,26 @@ def test_deadlock_freedom_is_proven_on_known_deadlock_free_models(name: str, met
     assert isinstance(result, Proven) and result.method == method
 
 
-def test_a_net_past_the_dense_limit_is_inconclusive_not_a_memory_error() -> None:
-    from analysis.stateeq import Unknown, check_unreachable, deadlocks
+def test_the_equation_is_built_from_the_arcs_not_a_dense_matrix(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Past tens of millions of places x transitions cells the dense incidence matrix
+    does not fit in memory; the equation needs one term per arc only."""
+    import analysis.stateeq
+    import analysis.structural
+    from analysis.stateeq import _sparse_rows
     from tests.analysis.test_structural import wide_net
 
-    result = check_unreachable(wide_net(), deadlocks())
-    assert isinstance(result, Unknown)
-    assert "too large for the structural method" in result.reason
-    assert "too large for the structural method" in result.explain()
+    for model in _oracle_models()[:12]:
+        net: Net = read_pnml(Path(CONFORMANCE) / model["pnml"])
+        dense = analysis.structural.incidence(net).rows()
+        rows = _sparse_rows(net)
+        assert [[row.get(t, 0) for t in range(len(net.transitions))] for row in rows] == dense
+
+    def refuse(*_: object, **__: object) -> None:
+        raise AssertionError("the dense incidence matrix was built")
+
+    monkeypatch.setattr(analysis.structural, "incidence", refuse)
+    monkeypatch.setattr(analysis.stateeq, "incidence", refuse, raising=False)
+    result = check_unreachable(wide_net(places=20, transitions=19), deadlocks())
+    assert isinstance(result, Candidate) and result.marking[-1] == 1

@@ -262,17 +262,27 @@ def test_state_equation_solution_realised_into_a_replayable_deadlock() -> None:
     assert net.marking_dict(marking) == deadlock.evidence.marking
 
 
-def test_a_net_too_large_for_the_dense_encodings_is_inconclusive_not_a_crash(
-    monkeypatch: pytest.MonkeyPatch,
+def test_a_net_of_30_million_cells_is_verified_end_to_end_from_pnml(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    import analysis.verify as verify_module
+    """6,001 places x 5,000 transitions: refused until dense matrices were dropped from
+    every method it needs; a chain of one token gives exact, checkable answers."""
+    from coral_lang.pnml import write_pnml
+    from tests.analysis.wide_nets import chain
 
-    monkeypatch.setattr(verify_module, "DENSE_CELL_LIMIT", 100)
-    report = verify(compile_mission(POOL))
-    assert report.verdict is Verdict.INCONCLUSIVE and report.exit_code() == 3
-    assert "58 places x 79 transitions" in report.property("deadlock").detail
-    deadlock = report.to_dict()["deadlock"]
-    assert isinstance(deadlock, dict) and deadlock["verdict"] == "inconclusive"
+    net = chain(5_000, spare_places=1_000)
+    assert len(net.places) * len(net.transitions) > 30_000_000
+    path = tmp_path / "wide.pnml"
+    write_pnml(net, path)
+    code = main(["verify", str(path), "--no-structure", "--format", "json"])
+    report = json.loads(capsys.readouterr().out)["files"][0]["report"]
+    assert code == 1 and report["verdict"] == "violated"  # the token stops at the end
+    figures = report["statespace"]
+    assert (figures["states"], figures["edges"], figures["complete"]) == (5_001, 5_000, True)
+    assert figures["max_tokens_place"] == 1 and report["bounded"]["verdict"] == "proven"
+    deadlock = report["deadlock"]
+    assert deadlock["verdict"] == "violated"
+    assert [step["transition"] for step in deadlock["trace"]] == [f"t{k}" for k in range(5_000)]
 
 
 def test_run_verification_keeps_the_state_space_of_its_report() -> None:

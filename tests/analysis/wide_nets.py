@@ -1,0 +1,44 @@
+"""Generated wide nets: many transitions, small state spaces.
+
+Wide nets are where the cost of a method tracks places x transitions rather than the
+states: a matrix or an enabling test over every transition. These nets make that cost
+visible at sizes a test can afford, and `bench/wide.py` reuses them at bench sizes.
+"""
+
+from __future__ import annotations
+
+from coral_lang.net import Net, Place, Transition
+
+
+def rings(n_rings: int, length: int, spare_places: int = 0) -> Net:
+    """``n_rings`` independent cycles of ``length`` places, one token each, plus
+    ``spare_places`` unmarked places read by nothing.
+
+    Reachable markings: ``length ** n_rings``; every marking enables ``n_rings``
+    transitions (``n_rings * length ** n_rings`` edges) and none is dead. The net has
+    ``n_rings * length`` transitions, so enabling by scanning every transition costs
+    ``length`` times what changes.
+    """
+    places: list[Place] = []
+    transitions: list[Transition] = []
+    for r in range(n_rings):
+        places += [Place(f"r{r}p{k}", 1 if k == 0 else 0) for k in range(length)]
+        transitions += [
+            Transition(f"r{r}t{k}", ((f"r{r}p{k}", 1),), ((f"r{r}p{(k + 1) % length}", 1),))
+            for k in range(length)
+        ]
+    places += [Place(f"spare{k}") for k in range(spare_places)]
+    return Net(
+        name=f"rings{n_rings}x{length}", places=tuple(places), transitions=tuple(transitions)
+    )
+
+
+def chain(length: int, spare_places: int = 0) -> Net:
+    """One token along ``length`` transitions, ending in a dead marking, plus
+    ``spare_places`` unmarked places read by nothing: ``length + 1`` markings,
+    ``length`` edges, one deadlock (after firing every transition), every place
+    bounded by 1."""
+    places = [Place(f"p{k}", 1 if k == 0 else 0) for k in range(length + 1)]
+    places += [Place(f"spare{k}") for k in range(spare_places)]
+    transitions = [Transition(f"t{k}", ((f"p{k}", 1),), ((f"p{k + 1}", 1),)) for k in range(length)]
+    return Net(name=f"chain{length}", places=tuple(places), transitions=tuple(transitions))
