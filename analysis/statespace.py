@@ -610,6 +610,8 @@ class _Explorer:
         layout = Layout.initial_guess(cn, one_hot_components(cn, budget))
         self.fnet = fnet = FieldNet(cn, layout)
         self.index = _EnablingIndex(fnet, layout, cn.n_transitions)
+        # transitions tested in every marking of a narrow level (the others by lookup)
+        self.tested = max(1, self.index.dense.size) if self.index.keyed else cn.n_transitions
         inc_t, inc_col = np.nonzero(fnet.inc_fields >= 0)
         self.inc_t = inc_t.astype(np.int64)
         self.inc_f = fnet.inc_fields[inc_t, inc_col]
@@ -1108,8 +1110,20 @@ class _Explorer:
     def narrow(self, width: int) -> bool:
         """Whether a layer of ``width`` markings is explored by a narrow round: few
         markings, and an enabled matrix small enough to compute at once."""
-        few = width <= NARROW_WIDTH and width * self.cn.n_transitions <= CELLS_PER_STEP
+        few = width <= NARROW_WIDTH and width * self.tested <= CELLS_PER_STEP
         return few and self.reducer is None
+
+    def narrow_edges(self, cols: npt.NDArray[np.integer]) -> tuple[Edges, int]:
+        """The enabled (transition, column) pairs of a narrow level and the cells it
+        cost. With keyed transitions (`_EnablingIndex`) only the lookups' candidates
+        and the densely tested transitions are looked at: a marking of a net with
+        thousands of transitions in components costs what it enables, not the width of
+        the net (`enabled_few` tests every transition in every marking)."""
+        if not self.index.keyed:
+            enabled = self.enabled_few(cols)
+            return _nonzero(enabled), enabled.size
+        edges = self.edges_of(cols)
+        return edges, cols.shape[1] * self.index.dense.size + edges[0].size
 
     def speculate(self, cols: npt.NDArray[np.integer], base: int) -> _Round:
         """Expand the narrow layer ``cols`` (states ``base ...``) and then its successors,
@@ -1123,12 +1137,14 @@ class _Explorer:
             current, keys = cols, self.store.keys[base : base + cols.shape[1]]
             budget = min(NARROW_CANDIDATES, self.chunk)  # `chunk` bounds work between checks
             needed: dict[int, int] = {}
-            n_t = self.cn.n_transitions
             while len(spec.keys) < NARROW_LEVELS:
-                if spec.keys and current.shape[1] * n_t > CELLS_PER_STEP:
-                    break  # too wide to expand in one go: the next frontier
-                enabled = self.enabled_few(current)
-                every = _nonzero(enabled)
+                width = current.shape[1]
+                # too wide to expand in one go, or (lookups make levels cheap) so wide
+                # that unchecked duplicates pile up: the next frontier
+                wide = width * self.tested > CELLS_PER_STEP
+                if spec.keys and (wide or (self.index.keyed and width > NARROW_WIDTH)):
+                    break
+                every, cells = self.narrow_edges(current)
                 counts = np.bincount(every[1], minlength=current.shape[1])
                 trans, src = self.fired_edges(every, None, current.shape[1])
                 new = self.successor_cols(current, src, trans)
@@ -1141,7 +1157,7 @@ class _Explorer:
                 self.fired[every[0]] = True
                 keys = keys.take(src, axis=0)
                 keys += self.key_delta.take(trans, axis=0)
-                spec.add(counts, new, keys, src, trans, enabled.size)
+                spec.add(counts, new, keys, src, trans, cells)
                 current = new
                 if not src.size or spec.total >= budget or spec.cells >= CELLS_PER_STEP:
                     break

@@ -340,6 +340,8 @@ MODES: dict[str, dict[str, float]] = {
     "sparse effects": {"NARROW_WIDTH": 0, "SLEEP_MIN_DEGREE": 0.0, "DENSE_DELTA_CELLS": 0},
     # transitions testing a component looked up by its value, on any net
     "indexed": {"NARROW_WIDTH": 0, "SLEEP_MIN_DEGREE": 0.0, "KEYED_MIN": 0, "KEYED_SHARE": 0.0},
+    # narrow rounds whose levels enable by lookup (`_Explorer.narrow_edges`)
+    "indexed, narrow": {"NARROW_WIDTH": 1 << 30, "KEYED_MIN": 0, "KEYED_SHARE": 0.0},
 }
 
 
@@ -513,3 +515,18 @@ def test_repacking_with_wider_fields_keeps_every_count(fields: int) -> None:
     repacked = narrow.repack(narrow.pack(rows), wide)
     assert (repacked == wide.pack(rows)).all()
     assert (wide.unpack(repacked, np.uint64) == rows).all()
+
+
+def test_a_wide_net_explores_at_the_cost_of_what_it_enables() -> None:
+    """4,200 transitions of which two are enabled per marking: the narrow rounds look
+    the candidates up by component value instead of testing every transition in every
+    marking, with exact counts and shortest traces."""
+    from tests.analysis.wide_nets import rings
+
+    net = rings(2, 100, idle=4_000)
+    space = explore(net)
+    assert space.complete and (space.states, space.edges) == (100**2, 2 * 100**2)
+    assert not space.deadlocks.size and space.max_tokens_place == 1
+    assert not space.fired_transitions[200:].any() and space.fired_transitions[:200].all()
+    far = space.find(lambda m: (m[:, 50] == 1) & (m[:, 150] == 1))  # both rings halfway
+    assert far is not None and len(space.trace_to(far)) == 100

@@ -10,9 +10,10 @@ from __future__ import annotations
 from coral_lang.net import Net, Place, Transition
 
 
-def rings(n_rings: int, length: int, spare_places: int = 0) -> Net:
+def rings(n_rings: int, length: int, spare_places: int = 0, idle: int = 0) -> Net:
     """``n_rings`` independent cycles of ``length`` places, one token each, plus
-    ``spare_places`` unmarked places read by nothing.
+    ``spare_places`` unmarked places read by nothing and ``idle`` transitions that
+    never fire (each takes from one of the ring places and from one empty place).
 
     Reachable markings: ``length ** n_rings``; every marking enables ``n_rings``
     transitions (``n_rings * length ** n_rings`` edges) and none is dead. The net has
@@ -28,6 +29,16 @@ def rings(n_rings: int, length: int, spare_places: int = 0) -> Net:
             for k in range(length)
         ]
     places += [Place(f"spare{k}") for k in range(spare_places)]
+    if idle:
+        places.append(Place("empty"))
+    transitions += [
+        Transition(
+            f"idle{k}",
+            ((f"r{k % n_rings}p{k % length}", 1), ("empty", 1)),
+            ((f"r{k % n_rings}p{(k + 1) % length}", 1),),
+        )
+        for k in range(idle)
+    ]
     return Net(
         name=f"rings{n_rings}x{length}", places=tuple(places), transitions=tuple(transitions)
     )
@@ -42,3 +53,21 @@ def chain(length: int, spare_places: int = 0) -> Net:
     places += [Place(f"spare{k}") for k in range(spare_places)]
     transitions = [Transition(f"t{k}", ((f"p{k}", 1),), ((f"p{k + 1}", 1),)) for k in range(length)]
     return Net(name=f"chain{length}", places=tuple(places), transitions=tuple(transitions))
+
+
+def parallel_rings(n_rings: int, length: int, copies: int) -> Net:
+    """`rings` where each step of a ring is ``copies`` parallel transitions (the same
+    arcs, different names): ``length ** n_rings`` markings, ``n_rings * length * copies``
+    transitions, and every marking enables ``n_rings * copies`` of them."""
+    places: list[Place] = []
+    transitions: list[Transition] = []
+    for r in range(n_rings):
+        places += [Place(f"r{r}p{k}", 1 if k == 0 else 0) for k in range(length)]
+        for k in range(length):
+            arcs = ((f"r{r}p{k}", 1),), ((f"r{r}p{(k + 1) % length}", 1),)
+            transitions += [Transition(f"r{r}t{k}c{c}", *arcs) for c in range(copies)]
+    return Net(
+        name=f"rings{n_rings}x{length}x{copies}",
+        places=tuple(places),
+        transitions=tuple(transitions),
+    )
