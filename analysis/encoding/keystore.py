@@ -331,15 +331,21 @@ class KeyStore:
         """Whether the slots with ``content`` hold the key of candidates ``which``
         (a positive content refers to ``stored``, a negative one to ``cand``)."""
         out = np.zeros(content.size, dtype=bool)
-        old = np.flatnonzero(content > 0)
-        if old.size:
-            ref = content.take(old).astype(np.int64)
+        full = np.flatnonzero(content)
+        ref = content.take(full).astype(np.int64)
+        if ref.size and int(ref.min()) > 0:  # the usual case: stored states only
             ref -= 1
-            out[old] = _same(stored.take(ref, axis=0), cand.take(which.take(old), axis=0))
-        pending = np.flatnonzero(content < 0)
-        if pending.size:
-            ref = -1 - content.take(pending).astype(np.int64)
-            out[pending] = _same(cand.take(ref, axis=0), cand.take(which.take(pending), axis=0))
+            out[full] = _same(stored.take(ref, axis=0), cand.take(which.take(full), axis=0))
+            return out
+        old = ref > 0
+        if old.any():
+            at = full.compress(old)
+            ref_old = ref.compress(old) - 1
+            out[at] = _same(stored.take(ref_old, axis=0), cand.take(which.take(at), axis=0))
+        if not old.all():
+            at = full.compress(~old)
+            ref_new = -1 - ref.compress(~old)
+            out[at] = _same(cand.take(ref_new, axis=0), cand.take(which.take(at), axis=0))
         return out
 
     def _resize(self, slots: int) -> None:
