@@ -24,16 +24,17 @@ per insertion instead, see `_Explorer.speculate`: numpy's cost per call, not per
 marking, is what limits a layer of a hundred markings.
 
 Counts are exact: packed keys are injective on reachable markings, multi-word keys
-are compared in full after a tag match, ``edges`` counts (marking, enabled transition)
+are compared in full, ``edges`` counts (marking, enabled transition)
 pairs, and a count field that some firing would overflow is widened (every stored key
 is re-packed) before any successor using it is trusted; past ``2**60`` tokens
-exploration stops with a reason. Each state keeps its parent and the transition that
-found it (``int32`` + ``int16`` for usual budgets), so `StateSpace.trace_to` returns a
-shortest firing sequence (sleep sets keep every state at its BFS depth).
+exploration stops with a reason. Each state keeps the transition that found it
+(``int16`` for usual nets) and no parent number: `StateSpace.trace_to` un-fires that
+transition on the key and looks the parent up in the store, one layer up at a time, so
+it returns a shortest firing sequence (sleep sets keep every state at its BFS depth).
 
-Memory per stored state: ``8 * W`` bytes of key (``W`` = words per marking), 6 bytes of
-parent pointer, and 24 to 48 bytes of hash table (8-byte tag and 4-byte state number
-per slot, load 0.25 to 0.5): about 40 to 60 bytes for one-word nets.
+Memory per stored state: ``8 * W`` bytes of key (``W`` = words per marking), 2 bytes of
+transition, and 6.7 to 10 bytes of hash table (a 4-byte state number per slot, load 0.4
+to 0.6, see `KeyStore`): about 17 to 20 bytes for one-word nets.
 
 Typical use::
 
@@ -118,7 +119,7 @@ class StateSpace:
         complete: whether every reachable marking was stored.
         stopped_reason: why exploration stopped early (``None`` when complete).
         seconds: wall time of the exploration.
-        stored_bytes: bytes of the arrays kept for the states (keys, index, parents).
+        stored_bytes: bytes of the arrays kept for the states (keys, table, ``via``).
         depth: BFS layers explored (the deepest state is at ``depth - 1``).
         reduced: whether partial-order reduction was on.
     """
@@ -139,7 +140,8 @@ class StateSpace:
     reduced: bool
     layout: Layout = field(repr=False)
     keys: npt.NDArray[np.uint64] = field(repr=False)
-    parents: npt.NDArray[np.integer] = field(repr=False)
+    store: KeyStore = field(repr=False)
+    key_delta: npt.NDArray[np.uint64] = field(repr=False)
     via: npt.NDArray[np.integer] = field(repr=False)
     layer_starts: npt.NDArray[np.int64] = field(repr=False)
 
@@ -224,9 +226,15 @@ class StateSpace:
         operator inputs every input in it fires while the run is on
         (`analysis.inputs.legal_trace`)."""
         path: list[int] = []
+        # No parent numbers are stored (4 bytes a state): the parent of a state is the
+        # stored marking that ``via`` leads from, found by un-firing it on the key.
+        key = self.keys[index : index + 1].copy()
         while index > 0:
-            path.append(int(self.via[index]))
-            index = int(self.parents[index])
+            t = int(self.via[index])
+            path.append(t)
+            key -= self.key_delta[t]
+            index = int(self.store.find(key)[0])
+            assert index >= 0, "the parent of a stored state is stored"
         path.reverse()
         if has_inputs(self.net):
             legal = legal_trace(self.net, path)
@@ -624,9 +632,7 @@ class _Explorer:
         self.widenings = np.zeros(cn.n_places, dtype=np.int64)  # per place
         self.reserve = min(max_states or DEFAULT_RESERVE, RESERVE_LIMIT)
         self.store = KeyStore(self.layout.n_words, wide_index=not small, reserve=self.reserve)
-        self.parents = Growable((), self.index_type, self.reserve)
         self.via = Growable((), self.via_type, self.reserve)
-        self.parents.append(np.zeros(1, dtype=self.index_type))
         self.via.append(np.zeros(1, dtype=self.via_type))
         self.dead: list[npt.NDArray[np.int64]] = []
         self.fired = np.zeros(cn.n_transitions, dtype=bool)
@@ -951,7 +957,6 @@ class _Explorer:
         added = self.store.add(keys, limit, want_ids)
         first = added.first
         if first.size:
-            self.parents.append((base + src.take(first)).astype(self.index_type))
             self.via.append(trans.take(first).astype(self.via_type))
             new = self.successor_cols(cols, src.take(first), trans.take(first))
             out.append(new)
@@ -1175,15 +1180,11 @@ class _Explorer:
         next frontier and its first state number."""
         self.sleep_next = False
         spec = self.speculate(cols, base)
-        keys, new_cols, parent, trans, counts = spec.joined()
+        keys, new_cols, _, trans, counts = spec.joined()
         limit = None if self.max_states is None else self.max_states - self.store.size
-        added = self.store.add(keys, limit, want_ids=True)
-        assert added.ids is not None
+        added = self.store.add(keys, limit)
         first, start = added.first, added.start
         self.account(spec.counts[0], base)
-        ref = parent.take(first)
-        found = np.where(ref >= 0, added.ids.take(np.maximum(ref, 0)), base - 1 - ref)
-        self.parents.append(found.astype(self.index_type))
         self.via.append(trans.take(first).astype(self.via_type))
         new = new_cols.take(first, axis=1)
         self.record(new)
@@ -1454,7 +1455,6 @@ def _explore_with_inputs(
             stopped_reason=None,
             depth=1,
             keys=space.keys[:1],
-            parents=space.parents[:1],
             via=space.via[:1],
             layer_starts=np.zeros(1, dtype=np.int64),
         )
@@ -1504,7 +1504,6 @@ def _explore(
         explorer.run()
     seconds = budget.clock() - explorer.start
     store = explorer.store
-    parents = explorer.parents.view[: store.size]
     via = explorer.via.view[: store.size]
     dead = np.concatenate(explorer.dead) if explorer.dead else np.zeros(0, dtype=np.int64)
     bounds = explorer.place_bounds()
@@ -1520,12 +1519,13 @@ def _explore(
         complete=explorer.stopped is None,
         stopped_reason=explorer.stopped,
         seconds=seconds,
-        stored_bytes=store.nbytes + parents.nbytes + via.nbytes,
+        stored_bytes=store.nbytes + via.nbytes,
         depth=len(explorer.layer_starts),
         reduced=por,
         layout=explorer.layout,
         keys=store.keys,
-        parents=parents,
+        store=store,
+        key_delta=explorer.key_delta,
         via=via,
         layer_starts=np.asarray(explorer.layer_starts, dtype=np.int64),
     )

@@ -14,15 +14,19 @@ import resource
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
-CONFORMANCE = REPO.parent / "shared" / "conformance"
+_SHARED = [REPO.parent / "shared", Path("/work/shared")]  # beside the checkout, or the team's
+CONFORMANCE = next((d / "conformance" for d in _SHARED if d.is_dir()), _SHARED[0] / "conformance")
 SMALL_LIMIT = 300_000  # models up to this many states form the default set
 STRETCH = {"Dekker-PT-020"}  # 1.2e9 edges: only with --stretch
+VERIFYPN = Path("/work/shared/peers/verifypn")  # TAPAAL's verifypn 4.4.2, see its README
+VERIFYPN_FLAGS = ["-n", "1", "-p", "-q", "0", "-e", "--disable-partitioning", "-s", "BFS"]
 RATE_RANGE = (100_000, 10_000_000)  # the target "states/s" is a median over this range
 
 
@@ -112,6 +116,42 @@ def peer_worker(model: str) -> dict[str, Any]:
     return {"model": model, "states": len(graph.states), "seconds": seconds}
 
 
+def verifypn(model: str, binary: Path, timeout: float) -> dict[str, Any] | None:
+    """Run verifypn's full BFS (no reductions) on one model: its wall seconds, peak
+    resident memory (from ``wait4``, the child's own) and state count; ``None`` when it
+    fails or runs out of time."""
+    cmd = [str(binary), *VERIFYPN_FLAGS, str(CONFORMANCE / "pnml" / f"{model}.pnml")]
+    started = time.perf_counter()
+    with tempfile.TemporaryFile("w+") as sink:
+        child = subprocess.Popen(cmd, stdout=sink, stderr=subprocess.DEVNULL)
+        while True:  # wait4 gives this child's own peak RSS (RUSAGE_CHILDREN mixes all)
+            pid, status, usage = os.wait4(child.pid, os.WNOHANG)
+            if pid:
+                break
+            if time.perf_counter() - started > timeout:
+                child.kill()
+                os.wait4(child.pid, 0)
+                child.returncode = -9
+                return None
+            time.sleep(0.005)
+        seconds = time.perf_counter() - started
+        child.returncode = os.waitstatus_to_exitcode(status)
+        sink.seek(0)
+        out = sink.read()
+    peak = usage.ru_maxrss * 1024
+    states = next(
+        (
+            int(line.split()[2])
+            for line in out.splitlines()
+            if line.startswith("STATE_SPACE STATES")
+        ),
+        None,
+    )
+    if states is None:
+        return None
+    return {"states": states, "seconds": seconds, "peak_rss": peak}
+
+
 def _run(args: list[str], python: str, timeout: float) -> dict[str, Any] | None:
     env = dict(os.environ, PYTHONPATH=str(REPO))
     try:
@@ -171,6 +211,19 @@ def _line(r: Row, por: bool, peers: bool, peer: dict[str, Any] | None, peer_time
     return line
 
 
+def _peer_columns(r: Row, peer: dict[str, Any] | None) -> str:
+    """verifypn's seconds and peak MiB, and coral's over verifypn's (time: coral's search
+    against verifypn's whole run; memory: both processes' peak resident sets)."""
+    if peer is None:
+        return f" {'failed':>8}"
+    agree = "" if peer["states"] == r.states else f"  (verifypn: {peer['states']:,} states!)"
+    return (
+        f" {peer['seconds']:>8.3f} {_mib(peer['peak_rss']):>7}"
+        f" {r.seconds / max(peer['seconds'], 1e-9):>7.2f} {r.peak_rss / peer['peak_rss']:>7.2f}"
+        + agree
+    )
+
+
 def _summary(rows: list[Row]) -> None:
     in_range = [r for r in rows if RATE_RANGE[0] <= r.states <= RATE_RANGE[1] and r.complete]
     ranged = [r.rate for r in in_range]
@@ -204,6 +257,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--peer-python", default=sys.executable, help="interpreter that has pm4py installed"
     )
     parser.add_argument("--peer-timeout", type=float, default=120.0, help="seconds for pm4py")
+    parser.add_argument(
+        "--peer",
+        action="store_true",
+        help="also run verifypn's full BFS on each model; ratios coral/verifypn",
+    )
+    parser.add_argument("--peer-binary", type=Path, default=VERIFYPN, help="verifypn executable")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     parser.add_argument("--peer-worker", help=argparse.SUPPRESS)
     return parser
@@ -230,7 +289,13 @@ def main(argv: list[str] | None = None) -> int:
             or (args.stretch and m["model"] in STRETCH)
         ]
     rows: list[Row] = []
-    print(_header(args.por, args.peers), flush=True)
+    if args.peer and not args.peer_binary.is_file():
+        print(f"bench/statespace.py: --peer: no verifypn at {args.peer_binary}", file=sys.stderr)
+        return 2
+    head = _header(args.por, args.peers)
+    if args.peer:
+        head += f" {'vpn s':>8} {'vpnMiB':>7} {'t ratio':>7} {'m ratio':>7}"
+    print(head, flush=True)
     for name in names:
         flags = ["--worker", name, "--repeat", str(args.repeat)]
         flags += ["--max-states", str(args.max_states)] + (["--por"] if args.por else [])
@@ -243,7 +308,10 @@ def main(argv: list[str] | None = None) -> int:
         peer = None
         if args.peers:
             peer = _run(["--peer-worker", name], args.peer_python, args.peer_timeout)
-        print(_line(row, args.por, args.peers, peer, args.peer_timeout), flush=True)
+        line = _line(row, args.por, args.peers, peer, args.peer_timeout)
+        if args.peer:
+            line += _peer_columns(row, verifypn(name, args.peer_binary, args.timeout))
+        print(line, flush=True)
     if rows:
         _summary(rows)
     return 0

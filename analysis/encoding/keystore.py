@@ -18,15 +18,21 @@ from analysis.encoding.compact import BoolArray, IntArray, KeyArray
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-EMPTY = np.uint64(0)
-"""Marks a free slot: tags are never 0 (a one-word key plus one, its top bit being 0,
-or a 63-bit hash plus one), so a table is born free from zeroed memory."""
+EMPTY = 0
+"""Marks a free slot: a slot holds a state number plus one (or, while a batch is being
+placed, minus one minus a candidate's position), never 0, so a table is born free from
+zeroed memory."""
 
-MAX_LOAD = 0.5
-"""Largest fill of the table after a batch (linear probing stays ~1.5 probes)."""
+MAX_LOAD = 0.6
+"""Largest fill of the table after a batch (linear probing stays ~1.75 probes per hit)."""
 
 BATCH_LOAD = 0.75
 """Largest fill while a batch is placed (batches are cut to stay below it)."""
+
+GROWTH = 1.5
+"""Factor by which a full table grows: with slots of 4 bytes and the load kept between
+``MAX_LOAD / GROWTH`` and ``MAX_LOAD``, the table costs 6.7-10 bytes per state (doubling
+would cost up to 13.3)."""
 
 _S1, _S27, _S29, _S30, _S31, _S32 = (np.uint64(k) for k in (1, 27, 29, 30, 31, 32))
 
@@ -221,17 +227,29 @@ def _reserved(shape: tuple[int, ...], dtype: npt.DTypeLike) -> npt.NDArray[Any]:
         return np.zeros((min(rows, 1 << 12), *shape[1:]), dtype=dtype)
 
 
+def _same(a: npt.NDArray[np.uint64], b: npt.NDArray[np.uint64]) -> BoolArray:
+    """Row-wise equality of keys: 1-D arrays for one-word keys, rows otherwise."""
+    if a.ndim == 1:
+        same: BoolArray = a == b
+        return same
+    return ~_rows_differ(a, b)
+
+
 class KeyStore:
     """Packed markings in discovery order plus an open-addressing set of them.
 
-    ``keys[i]`` is the packed marking of state ``i``. The table has one ``uint64`` *tag*
-    per slot (``EMPTY`` = free) and the state number stored there. For one-word keys the
-    tag is the key plus one; for wider keys it is a 63-bit hash plus one, and a tag
-    match is only trusted after the full keys compare equal, so hash collisions cost a
-    probe, never a wrong answer. Slots are probed linearly from a hash of the key;
-    inserts are vectorised over whole batches, equal keys in one batch resolved in the
-    table. The table lives in a prefix of a buffer reserved for ``reserve`` states and
-    doubles in place (see `Growable` for why).
+    ``keys[i]`` is the packed marking of state ``i``. The table holds nothing but state
+    numbers: one slot (4 bytes, 8 with ``wide_index``) is ``EMPTY`` or a state number
+    plus one, and a probe compares the candidate with the stored key it points to. This
+    costs one more memory access per probe than keeping a copy of the key (or a tag) in
+    the slot, but a third of the memory of the 12-byte tag-and-number slots it replaced,
+    and the table needs no copy of the keys at all: it is rebuilt from ``keys`` when it
+    grows. Slots are probed linearly from a hash of the key (mapped onto a table of
+    any size by multiply-shift, so it grows by `GROWTH`, not 2); inserts are vectorised
+    over whole batches, equal keys in one batch resolved in the table (their slots hold
+    minus one minus the candidate's position until the batch is numbered). The table
+    lives in a prefix of a buffer reserved for ``reserve`` states and grows in place
+    (see `Growable` for why).
     """
 
     def __init__(
@@ -245,11 +263,8 @@ class KeyStore:
         self._index_type = np.int64 if wide_index else np.int32
         reserve = min(max(capacity, reserve or 0), RESERVE_LIMIT)
         self._keys = Growable((n_words,), np.uint64, reserve)
-        self._log = max(4, (int(capacity / MAX_LOAD) - 1).bit_length())
-        room = 1 << (int(reserve / MAX_LOAD) - 1).bit_length()
-        self._tag_buffer = _reserved((room,), np.uint64)
-        self._index_buffer = _reserved((room,), self._index_type)
-        self._use_table(self._log)
+        self._buffer = _reserved((int(reserve / MAX_LOAD) + 16,), self._index_type)
+        self._use_table(max(16, int(capacity / MAX_LOAD) + 1))
 
     @classmethod
     def of(cls, keys: KeyArray, wide_index: bool = False, reserve: int = 0) -> KeyStore:
@@ -272,7 +287,7 @@ class KeyStore:
     @property
     def nbytes(self) -> int:
         """Bytes of the stored keys and of the table in use."""
-        return int(self.keys.nbytes + self._tags.nbytes + self._index.nbytes)
+        return int(self.keys.nbytes + self._index.nbytes)
 
     def rekey(self, keys: KeyArray) -> None:
         """Replace every stored key by ``keys`` (same states, same order, a new packing,
@@ -285,68 +300,80 @@ class KeyStore:
             self.n_words = keys.shape[1]
             self._keys = Growable((self.n_words,), np.uint64, self._keys.capacity)
             self._keys.append(keys)
-        self._tags[:] = EMPTY
-        tags, slots = self._locate(keys)
-        self._fill(tags, slots, np.arange(keys.shape[0], dtype=np.int64))
+        self._resize(self._slots)
 
     # -- slots -----------------------------------------------------------------------
 
-    def _locate(self, keys: KeyArray) -> tuple[KeyArray, IntArray]:
-        """Tag and home slot of each key."""
+    def _flat(self, keys: KeyArray) -> npt.NDArray[np.uint64]:
+        """One-word keys as a 1-D array (cheaper gathers and compares), others as is."""
+        return keys[:, 0] if self.n_words == 1 else keys
+
+    def _home(self, keys: KeyArray) -> IntArray:
+        """Home slot of each key: the top 32 bits of its hash scaled to the table."""
         h = _hash(keys)
-        slots = (h >> np.uint64(64 - self._log)).view(np.int64)
-        if self.n_words == 1:
-            tags = keys[:, 0] + np.uint64(1)
-        else:
-            tags = h >> _S1
-            tags += np.uint64(1)
-        return tags, slots
+        h >>= _S32
+        h *= np.uint64(self._slots)
+        h >>= _S32
+        return h.view(np.int64)
 
-    def _same_keys(self, cand: KeyArray, which: IntArray, slots: IntArray) -> BoolArray:
-        """Whether candidates ``which`` equal the key in ``slots`` (tags already match;
-        only wide keys get here). A negative index refers to a candidate of the batch
-        being placed."""
-        ref = self._index.take(slots).astype(np.int64)
-        other = np.empty((which.size, self.n_words), dtype=np.uint64)
-        old = ref >= 0
-        other[old] = self.keys.take(ref[old], axis=0)
-        other[~old] = cand.take(-1 - ref[~old], axis=0)
-        return ~_rows_differ(cand.take(which, axis=0), other)
+    def _wrap(self, slots: IntArray) -> IntArray:
+        """``slots`` taken modulo the table size (they are below twice of it), in place."""
+        np.subtract(slots, self._slots, out=slots, where=slots >= self._slots)
+        return slots
 
-    def _resize(self, log: int) -> None:
-        """A table of ``2**log`` slots, holding every stored key. Reads the old table
-        in slot order (no pass over the keys themselves): the new home slots are then
-        almost sorted already, which `_fill` likes."""
-        occupied = np.flatnonzero(self._tags)
-        tags, ids = self._tags.take(occupied), self._index.take(occupied)
-        del occupied
-        if self.n_words == 1:
-            keys = tags - np.uint64(1)
-            slots = (_hash(keys[:, None]) >> np.uint64(64 - log)).view(np.int64)
-        else:  # the tag is the hash shifted right by one, plus one
-            slots = ((tags - np.uint64(1)) >> np.uint64(63 - log)).view(np.int64)
-        self._tags[:] = EMPTY  # pages already touched; the rest of a buffer is still zero
-        self._use_table(log)
-        self._fill(tags, slots, ids)
+    def _matches(
+        self,
+        content: npt.NDArray[np.integer],
+        which: IntArray,
+        cand: npt.NDArray[np.uint64],
+        stored: npt.NDArray[np.uint64],
+    ) -> BoolArray:
+        """Whether the slots with ``content`` hold the key of candidates ``which``
+        (a positive content refers to ``stored``, a negative one to ``cand``)."""
+        out = np.zeros(content.size, dtype=bool)
+        full = np.flatnonzero(content)
+        ref = content.take(full).astype(np.int64)
+        if ref.size and int(ref.min()) > 0:  # the usual case: stored states only
+            ref -= 1
+            out[full] = _same(stored.take(ref, axis=0), cand.take(which.take(full), axis=0))
+            return out
+        old = ref > 0
+        if old.any():
+            at = full.compress(old)
+            ref_old = ref.compress(old) - 1
+            out[at] = _same(stored.take(ref_old, axis=0), cand.take(which.take(at), axis=0))
+        if not old.all():
+            at = full.compress(~old)
+            ref_new = -1 - ref.compress(~old)
+            out[at] = _same(cand.take(ref_new, axis=0), cand.take(which.take(at), axis=0))
+        return out
 
-    def _use_table(self, log: int) -> None:
-        """Make the table the first ``2**log`` slots of the buffers (new, larger
-        buffers if they are too small)."""
-        size = 1 << log
-        if size > min(self._tag_buffer.size, self._index_buffer.size):
-            self._tag_buffer = np.zeros(size, dtype=np.uint64)
-            self._index_buffer = np.zeros(size, dtype=self._index_type)
-        self._log = log
-        self._tags = self._tag_buffer[:size]
-        self._index = self._index_buffer[:size]
+    def _resize(self, slots: int) -> None:
+        """A table of ``slots`` slots, rebuilt from the stored keys a chunk at a time
+        (bounded temporaries; the old table's pages are reused, not copied)."""
+        self._index[:] = EMPTY  # pages already touched; the rest of a buffer is still zero
+        self._use_table(slots)
+        for start in range(0, self.size, FILL_CHUNK):
+            part = self.keys[start : start + FILL_CHUNK]
+            ids = np.arange(start, start + part.shape[0], dtype=np.int64)
+            self._place(self._home(part), ids)
 
-    def _fill(self, tags: KeyArray, slots: IntArray, ids: npt.NDArray[np.integer]) -> None:
+    def _use_table(self, slots: int) -> None:
+        """Make the table the first ``slots`` slots of the buffer (a new, larger buffer
+        if it is too small)."""
+        if slots > self._buffer.size:
+            self._buffer = np.zeros(0, dtype=self._index_type)  # freed before the next
+            self._buffer = np.zeros(slots, dtype=self._index_type)
+        self._slots = slots
+        self._index = self._buffer[:slots]
+
+    def _fill(self, slots: IntArray, ids: IntArray) -> None:
         """Place distinct keys into an empty table at once: in home-slot order, linear
         probing puts the ``i``-th key at ``max(slot_i, position_{i-1} + 1)``, a running
         maximum, computed a chunk at a time (small temporaries); the few keys that run
         past the end wrap around through `_place`."""
         order = np.argsort(slots, kind="stable")
-        last, size, chunk = -1, self._tags.size, FILL_CHUNK
+        last, size, chunk = -1, self._slots, FILL_CHUNK
         for start in range(0, order.size, chunk):
             part = order[start : start + chunk]
             steps = np.arange(part.size, dtype=np.int64)
@@ -358,66 +385,74 @@ class KeyStore:
             inside = position < size
             rest = part[~inside]
             part, position = part[inside], position[inside]
-            self._tags[position] = tags.take(part)
-            self._index[position] = ids.take(part)
+            self._index[position] = ids.take(part) + 1
             if rest.size:  # after the others: they wrap around to the first free slots
-                self._place(tags.take(rest), slots.take(rest), ids.take(rest).astype(np.int64))
+                self._place(slots.take(rest), ids.take(rest))
+
+    def _grown(self, slots: int) -> int:
+        """The table size after one growth step from ``slots``."""
+        return int(slots * GROWTH) + 1
 
     def _reserve(self, need: int, load: float) -> None:
         """Grow the table until ``need`` keys fill it at most ``load``."""
-        log = self._log
-        while need > load * (1 << log):
-            log += 1
-        if log != self._log:
-            self._resize(log)
+        slots = self._slots
+        while need > load * slots:
+            slots = self._grown(slots)
+        if slots != self._slots:
+            self._resize(slots)
 
-    def _place(self, tags: KeyArray, slots: IntArray, ids: IntArray) -> None:
-        """Write pairwise distinct keys (by tag and home slot) that are not in the table
-        yet, as states ``ids``."""
-        mask = (1 << self._log) - 1
-        table, index = self._tags, self._index
+    def _place(self, slots: IntArray, ids: IntArray) -> None:
+        """Write pairwise distinct keys (by home slot) that are not in the table yet, as
+        states ``ids``."""
+        index = self._index
+        values = (ids + 1).astype(self._index_type)
+        slots = slots.copy()
         while slots.size:
-            free = np.flatnonzero(table.take(slots) == EMPTY)
-            fs, ft, fi = slots.take(free), tags.take(free), ids.take(free)
-            table[fs] = ft
-            ok = np.flatnonzero(table.take(fs) == ft)
-            index[fs.take(ok)] = fi.take(ok)
+            free = np.flatnonzero(index.take(slots) == EMPTY)
+            fs, fv = slots.take(free), values.take(free)
+            index[fs] = fv
             placed = np.zeros(slots.size, dtype=bool)
-            placed[free.take(ok)] = index.take(fs.take(ok)) == fi.take(ok)
+            placed[free] = index.take(fs) == fv
             more = np.flatnonzero(~placed)
             slots = slots.take(more)
             slots += 1
-            slots &= mask
-            tags, ids = tags.take(more), ids.take(more)
+            self._wrap(slots)
+            values = values.take(more)
 
     def _insert_distinct(self, keys: KeyArray) -> None:
         """Store pairwise distinct new keys as the next states."""
         need = self.size + keys.shape[0]
         self._reserve(need, MAX_LOAD)
-        tags, slots = self._locate(keys)
+        slots = self._home(keys)
         ids = np.arange(self.size, need, dtype=np.int64)
         if self.size:
-            self._place(tags, slots, ids)
+            self._place(slots, ids)
         else:
-            self._fill(tags, slots, ids)
+            self._fill(slots, ids)
         self._keys.append(keys)
 
     # -- queries and inserts ------------------------------------------------------------
 
-    def _probe(self, slots: IntArray, tags: KeyArray) -> tuple[BoolArray, BoolArray, IntArray]:
-        """One probing round from ``slots``: per candidate, whether it found its tag,
-        whether it found a free slot (never both), and that slot (the last one looked
-        at when neither). Small batches look at `_WINDOW` consecutive slots at once
-        (fewer rounds, fewer numpy calls); large ones at one (less work per candidate).
-        """
+    def _probe(
+        self,
+        slots: IntArray,
+        which: IntArray,
+        cand: npt.NDArray[np.uint64],
+        stored: npt.NDArray[np.uint64],
+    ) -> tuple[BoolArray, BoolArray, IntArray]:
+        """One probing round from ``slots`` for candidates ``which``: per candidate,
+        whether it found its key, whether it found a free slot (never both), and that
+        slot (the last one looked at when neither). Small batches look at `_WINDOW`
+        consecutive slots at once (fewer rounds, fewer numpy calls); large ones at one
+        (less work per candidate)."""
         if slots.size > PROBE_WINDOW_BELOW:
-            content = self._tags.take(slots)
-            return content == tags, content == EMPTY, slots
-        mask = (1 << self._log) - 1
+            content = self._index.take(slots)
+            return self._matches(content, which, cand, stored), content == EMPTY, slots
         window = slots[:, None] + _WINDOW
-        window &= mask
-        contents = self._tags.take(window)
-        hits = contents == tags[:, None]
+        self._wrap(window)
+        contents = self._index.take(window)
+        wide = np.repeat(which, _WINDOW.size)
+        hits = self._matches(contents.reshape(-1), wide, cand, stored).reshape(contents.shape)
         stops = contents == EMPTY
         stops |= hits
         first = stops.argmax(axis=1)
@@ -428,34 +463,30 @@ class KeyStore:
 
     def _onward(self, at: IntArray, stopped: BoolArray, more: IntArray) -> IntArray:
         """Where the candidates ``more`` probe next: after the slot they stopped at (a
-        claim lost, or a tag match that was another key), or after the window when they
-        found neither their tag nor a free slot (``at`` is then its first slot)."""
+        claim lost to another key), or after the window when they found neither their
+        key nor a free slot (``at`` is then its first slot)."""
         onward = at.take(more)
         if stopped.size > PROBE_WINDOW_BELOW:
             onward += 1
         else:
             onward += np.where(stopped.take(more), 1, _WINDOW.size)
-        onward &= (1 << self._log) - 1
-        return onward
+        return self._wrap(onward)
 
     def find(self, cand: KeyArray) -> IntArray:
         """State number of each candidate key, ``-1`` if it is not stored."""
         cand = np.ascontiguousarray(cand)
-        tags, slots = self._locate(cand)
+        flat, stored = self._flat(cand), self._flat(self.keys)
+        slots = self._home(cand)
         out = np.full(cand.shape[0], -1, dtype=np.int64)
         pos = np.arange(cand.shape[0], dtype=np.int64)
         while pos.size:
-            hit, free, at = self._probe(slots, tags)
-            stopped = hit | free
+            hit, free, at = self._probe(slots, pos, flat, stored)
             where = np.flatnonzero(hit)
-            if self.n_words > 1 and where.size:
-                same = self._same_keys(cand, pos.take(where), at.take(where))
-                hit[where[~same]] = False
-                where = where[same]
-            out[pos.take(where)] = self._index.take(at.take(where))
-            more = np.flatnonzero(~(hit | free))
+            out[pos.take(where)] = self._index.take(at.take(where)).astype(np.int64) - 1
+            stopped = hit | free
+            more = np.flatnonzero(~stopped)
             slots = self._onward(at, stopped, more)
-            pos, tags = pos.take(more), tags.take(more)
+            pos = pos.take(more)
         return out
 
     def contains(self, cand: KeyArray) -> BoolArray:
@@ -483,9 +514,9 @@ class KeyStore:
         ids: list[IntArray] = []
         done = 0
         while done < m:
-            room = int(BATCH_LOAD * (1 << self._log)) - self.size
-            if room < min(m - done, 1 << (self._log - 3)):
-                self._resize(self._log + 1)
+            room = int(BATCH_LOAD * self._slots) - self.size
+            if room < min(m - done, self._slots >> 3):
+                self._resize(self._grown(self._slots))
                 continue
             first, piece_ids = self._claim(cand[done : done + room], want_ids)
             firsts.append(first + done)
@@ -504,20 +535,18 @@ class KeyStore:
         occurrence of every new key becomes a new state. Returns the positions of those
         first occurrences (ascending) and, if asked, every candidate's state number."""
         m = cand.shape[0]
-        tags, slots = self._locate(cand)
+        flat, stored = self._flat(cand), self._flat(self.keys)
+        slots = self._home(cand)
         index = self._index
         final = np.empty(m, dtype=np.int64) if want_ids else None
         pos = np.arange(m, dtype=np.int64)
         claimed: list[IntArray] = []
         while True:
-            done, empty, at = self._probe(slots, tags)
+            done, empty, at = self._probe(slots, pos, flat, stored)
             stopped = done | empty
-            if self.n_words > 1 and done.any():
-                hit = np.flatnonzero(done)
-                done[hit] = self._same_keys(cand, pos.take(hit), at.take(hit))
             free = np.flatnonzero(empty)
             if free.size:
-                done[free] = self._claim_free(cand, pos.take(free), at.take(free), tags, free)
+                done[free] = self._claim_free(flat, pos.take(free), at.take(free))
                 claimed.append(self._reps)
             if final is not None:
                 settled = np.flatnonzero(done)
@@ -526,7 +555,7 @@ class KeyStore:
             if not more.size:
                 break
             slots = self._onward(at, stopped, more)
-            pos, tags = pos.take(more), tags.take(more)
+            pos = pos.take(more)
         new_slots = np.concatenate(claimed) if claimed else np.zeros(0, dtype=np.int64)
         reps = -1 - index.take(new_slots).astype(np.int64)
         is_first = np.zeros(m, dtype=bool)
@@ -535,37 +564,29 @@ class KeyStore:
         slot_of = np.empty(m, dtype=np.int64)
         slot_of[reps] = new_slots
         need = self.size + first.size
-        index[slot_of.take(first)] = np.arange(self.size, need, dtype=np.int64)
+        index[slot_of.take(first)] = np.arange(self.size + 1, need + 1, dtype=np.int64)
         self._keys.append(cand.take(first, axis=0))
-        return first, (index.take(final).astype(np.int64) if final is not None else None)
+        if final is None:
+            return first, None
+        return first, index.take(final).astype(np.int64) - 1
 
-    def _claim_free(
-        self, cand: KeyArray, fp: IntArray, fs: IntArray, tags: KeyArray, free: IntArray
-    ) -> BoolArray:
-        """Candidates ``fp`` (batch positions) found free slots ``fs``: write their tags,
-        then among the candidates whose tag stayed, the first (smallest position) is
-        recorded in the slot as the new key's representative, the others with the same
-        key are its repeats. Returns which candidates are settled (representative or
-        repeat); sets ``self._reps`` to the slots that got a representative."""
-        ft = tags.take(free)
-        table, index = self._tags, self._index
+    def _claim_free(self, cand: npt.NDArray[np.uint64], fp: IntArray, fs: IntArray) -> BoolArray:
+        """Candidates ``fp`` (batch positions) found free slots ``fs``: each slot gets
+        the first (smallest position) of its claimants as the new key's representative,
+        and the claimants with the representative's key are its repeats. Returns which
+        candidates are settled (representative or repeat); sets ``self._reps`` to the
+        slots that got a representative."""
+        index = self._index
         # Several candidates may claim one slot: written in reverse, so the smallest
         # position normally writes last and wins (checked below, never assumed).
-        table[fs[::-1]] = ft[::-1]
-        ok = np.flatnonzero(table.take(fs) == ft)
-        fs_ok, fp_ok = fs.take(ok), fp.take(ok)
-        refs = -1 - fp_ok
-        index[fs_ok[::-1]] = refs[::-1]
-        rep = -1 - index.take(fs_ok).astype(np.int64)
-        if (rep > fp_ok).any():  # numpy assigned repeats in another order
-            np.maximum.at(index, fs_ok, refs.astype(self._index_type))
-            rep = -1 - index.take(fs_ok).astype(np.int64)
-        settled = np.zeros(fs.size, dtype=bool)
-        if self.n_words == 1:
-            settled[ok] = True
-        else:  # equal tags, different keys: only repeats of the representative settle
-            settled[ok] = ~_rows_differ(cand.take(fp_ok, axis=0), cand.take(rep, axis=0))
-        self._reps = fs_ok.compress(rep == fp_ok)
+        refs = (-1 - fp).astype(self._index_type)
+        index[fs[::-1]] = refs[::-1]
+        rep = -1 - index.take(fs).astype(np.int64)
+        if (rep > fp).any():  # numpy assigned repeats in another order
+            np.maximum.at(index, fs, refs)
+            rep = -1 - index.take(fs).astype(np.int64)
+        settled = _same(cand.take(fp, axis=0), cand.take(rep, axis=0))
+        self._reps = fs.compress(rep == fp)
         return settled
 
     def _add_capped(self, cand: KeyArray, limit: int) -> Added:

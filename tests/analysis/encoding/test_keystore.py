@@ -1,0 +1,61 @@
+"""`KeyStore`'s table of state numbers: what it costs per state, that it grows by
+`GROWTH` without losing a key, and that traces rebuilt from it (no parent numbers are
+stored) are shortest firing sequences to every state."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+
+from analysis.encoding import MAX_LOAD, KeyStore
+from analysis.encoding.keystore import GROWTH
+from analysis.statespace import explore
+from coral_lang.net import Net
+from tests.analysis.strategies import small_nets
+
+
+def test_table_costs_at_most_four_bytes_per_slot_at_the_lowest_load() -> None:
+    rng = np.random.default_rng(11)
+    store = KeyStore(1, capacity=16)
+    slots: set[int] = set()
+    for _ in range(120):  # many growth steps, each rebuilding the table from the keys
+        batch = rng.integers(0, 1 << 62, size=(500, 1), dtype=np.int64).astype(np.uint64)
+        store.add(batch)
+        table = store.nbytes - store.keys.nbytes
+        if store.size > 2000:  # past the first batches, which grow it several times
+            slots.add(table // 4)
+        assert table <= 4 * GROWTH / MAX_LOAD * store.size + 64
+        assert store.size <= MAX_LOAD * (table // 4)
+    assert len(slots) > 5  # it did grow, by less than doubling each time
+    assert max(b / a for a, b in zip(sorted(slots), sorted(slots)[1:], strict=False)) < 1.6
+    ids = store.find(store.keys[::-1])
+    assert ids.tolist() == list(range(store.size - 1, -1, -1))
+
+
+def test_rekey_to_wider_keys_keeps_every_number() -> None:
+    store = KeyStore(1)
+    keys = np.arange(1, 30_001, dtype=np.uint64)[:, None] * np.uint64(7919)
+    store.add(keys)
+    wider = np.concatenate([keys, keys ^ np.uint64(0xFF)], axis=1)
+    store.rekey(wider)
+    assert store.n_words == 2
+    assert store.find(wider[::3]).tolist() == list(range(0, 30_000, 3))
+    assert store.find(np.array([[1, 2]], dtype=np.uint64)).tolist() == [-1]
+
+
+def _replay(net: Net, trace: list[int]) -> tuple[int, ...]:
+    marking = net.initial_marking()
+    for t in trace:
+        assert net.enabled(marking, net.transitions[t])
+        marking = net.fire(marking, net.transitions[t])
+    return marking
+
+
+@settings(max_examples=4, deadline=None, derandomize=True)
+@given(small_nets(max_initial=3))
+def test_every_state_has_a_shortest_trace_without_parent_numbers(net: Net) -> None:
+    space = explore(net, max_states=300)
+    for index in range(space.states):
+        trace = space.trace_to(index)
+        assert _replay(net, trace) == space.marking(index)
+        assert len(trace) == space.depth_of(index)
