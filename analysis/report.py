@@ -303,6 +303,7 @@ class StateSpaceFigures:
     reduced: bool
     seconds: float
     bytes_per_state: float
+    reduction_note: str | None = None
 
     def to_dict(self) -> dict[str, object]:
         """JSON form."""
@@ -315,6 +316,7 @@ class StateSpaceFigures:
             "complete": self.complete,
             "stopped_reason": self.stopped_reason,
             "reduced": self.reduced,
+            "reduction_note": self.reduction_note,
             "seconds": round(self.seconds, 6),
             "bytes_per_state": round(self.bytes_per_state, 2),
         }
@@ -412,7 +414,8 @@ class Report:
             f"net '{self.net_name}'  {self.digest}",
             f"state space: {space.states} states, {space.edges} edges"
             + ("" if space.complete else f" (incomplete: {space.stopped_reason})")
-            + (" (partial-order reduced)" if space.reduced else "")
+            + (" (partial-order reduced)" if space.reduced and not space.reduction_note else "")
+            + (f" (partial-order reduction: {space.reduction_note})" if space.reduction_note else "")
             + f"; at most {space.max_tokens_place} token(s) in a place, "
             f"{space.max_tokens_marking} in a marking; {space.seconds:.3f} s",
         ]

@@ -122,6 +122,8 @@ class StateSpace:
         stored_bytes: bytes of the arrays kept for the states (keys, table, ``via``).
         depth: BFS layers explored (the deepest state is at ``depth - 1``).
         reduced: whether partial-order reduction was on.
+        reduction_note: with ``por``, why the reduction was switched off part-way
+            (it pruned almost nothing on a sample of markings), else ``None``.
     """
 
     net: Net
@@ -144,6 +146,7 @@ class StateSpace:
     key_delta: npt.NDArray[np.uint64] = field(repr=False)
     via: npt.NDArray[np.integer] = field(repr=False)
     layer_starts: npt.NDArray[np.int64] = field(repr=False)
+    reduction_note: str | None = None
 
     @property
     def bytes_per_state(self) -> float:
@@ -303,6 +306,18 @@ every marking costs less than the lookup (Referendum, 31 transitions: 40 % slowe
 DENSE_DELTA_CELLS = 1 << 24
 """Largest places x transitions for a dense effect matrix (successor columns by one
 gather); larger nets add their sparse effects instead."""
+
+
+POR_SAMPLE = 4096
+"""Markings with a choice (two or more enabled transitions) that partial-order
+reduction is judged on: if it pruned almost none of their firings, the rest of the
+search expands every marking fully."""
+
+POR_USELESS = 0.95
+"""Share of the enabled firings of the sample that the stubborn sets kept, from which
+the reduction is judged useless. Expanding fully is always sound (every enabled set is
+stubborn), and it costs a fraction of computing stubborn sets that end up full: on
+TokenRing-PT-010 and Dekker-PT-015 they kept every firing and cost 30-60x the search."""
 
 
 class SleepSets:
@@ -649,6 +664,10 @@ class _Explorer:
         self.sleep = SleepSets(cn) if wanted else None
         self.sleep_next = False  # whether this layer computes the next one's sleep sets
         self.next_sleep: list[npt.NDArray[np.uint64]] = []
+        self.choice_markings = 0  # POR: markings with a choice seen, firings kept of them
+        self.choice_enabled = 0
+        self.choice_fired = 0
+        self.reduction_note: str | None = None
 
     def _set_layout(self, layout: Layout) -> None:
         cn, fnet = self.cn, self.fnet
@@ -1028,7 +1047,8 @@ class _Explorer:
     ) -> npt.NDArray[np.integer]:
         """`step` with partial-order reduction: fire a stubborn subset of the enabled
         transitions of each marking (needs the whole enabled matrix)."""
-        assert self.reducer is not None
+        reducer = self.reducer
+        assert reducer is not None
         while True:
             enabled = self.enabled(cols)
             needed = self.overflow(cols, enabled, _nonzero(enabled))
@@ -1041,11 +1061,12 @@ class _Explorer:
         self.fired |= enabled.any(axis=1)
         if not any_enabled.all():
             self.dead.append(base + np.flatnonzero(~any_enabled))
-        reduced = self.reducer.reduce(self.fnet.places(cols, self.layout), enabled)
+        reduced = reducer.reduce(self.fnet.places(cols, self.layout), enabled)
         rtrans, rsrc = _nonzero(reduced)
+        self.judge_reduction(enabled, rsrc.size)
         self.edges += rsrc.size
         added = self.insert(cols, base, (rtrans, rsrc), out, want_ids=True)
-        if not self.reducer.needs_proviso or self.stopped:
+        if not reducer.needs_proviso or self.stopped:
             return cols
         # Cycle proviso: a marking whose reduced successors include one that was known
         # before it was expanded (stored earlier, or found first by another marking of
@@ -1066,6 +1087,25 @@ class _Explorer:
             self.edges += esrc.size
             self.insert(cols, base, (etrans, esrc), out)
         return cols
+
+    def judge_reduction(self, enabled: npt.NDArray[np.bool_], fired: int) -> None:
+        """Count what the stubborn sets kept of the markings with a choice, and switch
+        the reduction off once a sample shows it prunes almost nothing."""
+        counts = enabled.sum(axis=0)
+        choice = counts > 1
+        self.choice_markings += int(np.count_nonzero(choice))
+        self.choice_enabled += int(counts[choice].sum())
+        self.choice_fired += fired - int(np.count_nonzero(counts == 1))
+        if self.choice_markings < POR_SAMPLE or self.reduction_note is not None:
+            return
+        kept = self.choice_fired / max(1, self.choice_enabled)
+        if kept >= POR_USELESS:
+            self.reducer = None
+            self.reduction_note = (
+                f"stubborn sets kept {kept:.0%} of the firings of the first "
+                f"{self.choice_markings:,} markings with a choice: the rest of the search "
+                "expanded every marking fully"
+            )
 
     # -- the loop --------------------------------------------------------------------
 
@@ -1219,7 +1259,11 @@ class _Explorer:
         per_state = self.edges / max(1, self.store.size)
         by_edges = int(EDGES_PER_STEP / max(per_state, 1.0))
         by_matrix = CELLS_PER_STEP // max(1, self.cn.n_transitions)
-        return max(min(256, self.chunk), min(self.chunk, by_edges, by_matrix))
+        size = max(min(256, self.chunk), min(self.chunk, by_edges, by_matrix))
+        if self.reducer is not None and self.choice_markings < POR_SAMPLE:
+            # Small steps until the reduction is judged, so it is judged on the sample.
+            size = min(size, max(256, POR_SAMPLE - self.choice_markings))
+        return size
 
     def check_time(self, left: int, out: list[npt.NDArray[np.integer]]) -> None:
         """Report progress, and stop (with the budget's reason) past its deadline."""
@@ -1528,4 +1572,5 @@ def _explore(
         key_delta=explorer.key_delta,
         via=via,
         layer_starts=np.asarray(explorer.layer_starts, dtype=np.int64),
+        reduction_note=explorer.reduction_note,
     )

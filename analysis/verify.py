@@ -272,6 +272,7 @@ class _Checker:
             complete=space.complete,
             stopped_reason=space.stopped_reason,
             reduced=space.reduced,
+            reduction_note=space.reduction_note,
             seconds=space.seconds,
             bytes_per_state=space.bytes_per_state,
         )

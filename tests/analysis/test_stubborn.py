@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from functools import cache
 from typing import Any
+from unittest import mock
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from analysis import statespace
 from analysis.encoding import CompactNet
 from analysis.statespace import StateSpace, explore
 from analysis.stubborn import StubbornSets
@@ -146,3 +148,55 @@ def test_place_predicates_match_the_full_search_on_conformance_models(name: str)
             predicate = _holds(places, levels)
             assert (reduced.find(predicate) is None) == (full.find(predicate) is None)
         assert reduced.max_sum(places) == full.max_sum(places)
+
+
+def _shared_switches(n: int) -> Net:
+    """``n`` on/off switches that all read one shared place (take its token and put it
+    back): every transition shares an input place with every other, so no stubborn set
+    is smaller than all enabled transitions, and there are ``2 ** n`` markings."""
+    offs = [Place(f"off{i}", 1) for i in range(n)]
+    places = (Place("g", 1), *offs, *(Place(f"on{i}") for i in range(n)))
+    transitions = tuple(
+        Transition(f"up{i}", ((f"off{i}", 1), ("g", 1)), ((f"on{i}", 1), ("g", 1)))
+        for i in range(n)
+    ) + tuple(
+        Transition(f"down{i}", ((f"on{i}", 1), ("g", 1)), ((f"off{i}", 1), ("g", 1)))
+        for i in range(n)
+    )
+    return Net("switches", places, transitions)
+
+
+def test_a_reduction_that_prunes_nothing_is_switched_off_and_says_so() -> None:
+    net = _shared_switches(13)
+    full = explore(net)
+    reduced = explore(net, por=True)
+    assert full.complete and reduced.complete
+    assert reduced.states == full.states > statespace.POR_SAMPLE
+    assert (
+        reduced.reduction_note is not None
+        and "expanded every marking fully" in reduced.reduction_note
+    )
+    assert _dead(reduced) == _dead(full)
+
+
+def test_a_reduction_that_prunes_is_kept() -> None:
+    reduced = explore(_independent(14), por=True)
+    assert reduced.reduction_note is None and reduced.states == 15
+
+
+@pytest.mark.slow
+@settings(max_examples=200)
+@given(small_nets(), st.integers(1, 40))
+def test_switching_the_reduction_off_part_way_keeps_every_deadlock(net: Net, sample: int) -> None:
+    """Markings expanded with stubborn sets before the switch and fully after it: a
+    mixed graph still keeps every deadlock (a full expansion is a stubborn set)."""
+    full = explore(net, max_states=BUDGET)
+    if not full.complete:
+        return
+    with (
+        mock.patch.object(statespace, "POR_SAMPLE", sample),
+        mock.patch.object(statespace, "POR_USELESS", 0.0),
+    ):
+        reduced = explore(net, max_states=BUDGET, por=True, chunk=4)
+    assert reduced.complete and reduced.states <= full.states
+    assert _dead(reduced) == _dead(full)
