@@ -322,6 +322,13 @@ class StateSpaceFigures:
         }
 
 
+def _reduction_text(space: StateSpaceFigures) -> str:
+    """How the state space was reduced, for the text report's first line."""
+    if space.reduction_note:
+        return f" (partial-order reduction: {space.reduction_note})"
+    return " (partial-order reduced)" if space.reduced else ""
+
+
 @dataclass
 class Report:
     """Everything `analysis.verify` found about one net."""
@@ -414,8 +421,7 @@ class Report:
             f"net '{self.net_name}'  {self.digest}",
             f"state space: {space.states} states, {space.edges} edges"
             + ("" if space.complete else f" (incomplete: {space.stopped_reason})")
-            + (" (partial-order reduced)" if space.reduced and not space.reduction_note else "")
-            + (f" (partial-order reduction: {space.reduction_note})" if space.reduction_note else "")
+            + _reduction_text(space)
             + f"; at most {space.max_tokens_place} token(s) in a place, "
             f"{space.max_tokens_marking} in a marking; {space.seconds:.3f} s",
         ]
