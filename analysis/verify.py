@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import TYPE_CHECKING, cast
 
@@ -72,6 +72,8 @@ Predicate = Callable[[Markings], npt.NDArray[np.bool_]]
 EXPLICIT = "explicit state space"
 REALISED = "state equation, solution realised as a firing sequence"
 STRUCTURE_SECONDS = 2.0  # each structural computation; results say when they were cut off
+SEARCH_SHARE = 0.8  # of the command's time limit, for the explicit search; the rest: proofs
+STRUCTURE_FACTS = ("invariants", "structural_boundedness", "siphons_traps")
 QUICK_COVERABILITY_NODES = 2_000
 QUICK_COVERABILITY_SECONDS = 1.0
 COVERABILITY_SECONDS = 10.0
@@ -174,7 +176,10 @@ def run_verification(
             inconclusive).
     """
     options = options or VerifyOptions()
-    budget = budget or Budget()
+    # One budget for the whole command: ``time_limit`` bounds every stage (search,
+    # proofs, termination, timed analysis, structure), not only the search. A stage
+    # that finds it spent says so and the later ones report inconclusive, unrun.
+    budget = (budget or Budget()).child(seconds=options.time_limit)
     started = budget.clock()
     cells = len(net.places) * len(net.transitions)
     if cells > DENSE_CELL_LIMIT:
@@ -192,7 +197,12 @@ def run_verification(
     ]
     timed = None
     if options.timed is not None:
-        properties, timed = _timed(net, profiles, options.timed, properties)
+        left = budget.remaining()
+        timed_options = options.timed
+        if left is not None:
+            limit = left if timed_options.time_limit_s is None else timed_options.time_limit_s
+            timed_options = replace(timed_options, time_limit_s=min(limit, left))
+        properties, timed = _timed(net, profiles, timed_options, properties)
     structure = checker.structure() if options.structural else {}
     report = Report(
         net_name=net.name,
@@ -264,6 +274,10 @@ class _Checker:
         if self.cover.bounded is False:
             max_states = min(max_states or UNBOUNDED_STATES, UNBOUNDED_STATES)
             time_limit = min(time_limit or UNBOUNDED_SECONDS, UNBOUNDED_SECONDS)
+        if time_limit is not None and budget.limit is not None:
+            # The search gets a share of the command's limit, so the proofs that need
+            # no complete state space (the state equation, coverability) still run.
+            time_limit = min(time_limit, budget.limit * SEARCH_SHARE)
         self.space: StateSpace = explore(
             net,
             max_states=max_states,
@@ -389,6 +403,10 @@ class _Checker:
         its counts replays on the net and ends in a bad marking (then it is real)."""
         from analysis import stateeq
 
+        if self.budget.expired():
+            # Building the equation alone takes seconds on a wide net: not past the limit.
+            reason = f"not run: {self.budget.time_reason()} before the state equation"
+            return stateeq.Unknown(bad=bad, reason=reason), None
         result = stateeq.check_unreachable(
             self.net,
             bad,
@@ -906,7 +924,9 @@ class _Checker:
     # -- structure --------------------------------------------------------------------------
 
     def structure(self) -> dict[str, object]:
-        """Structural facts for the report; each computation has its own time limit."""
+        """Structural facts for the report; each computation has its own time slice,
+        inside the command's budget: once that is spent the remaining ones are
+        reported as not computed, naming the limit, instead of running."""
         from analysis.invariants import invariant_report
         from analysis.siphons import siphon_trap_check
         from analysis.structural import classify, structural_boundedness
@@ -917,8 +937,10 @@ class _Checker:
             "transitions": len(net.transitions),
             "arcs": sum(len(t.inputs) + len(t.outputs) for t in net.transitions),
         }
-        net_class = classify(net)
-        facts["class"] = list(net_class.names())
+        # Near-linear in the arcs (see `classify`): always computed.
+        facts["class"] = list(classify(net).names())
+        if self._spent(facts, "invariants", "invariants"):
+            return facts
         invariants = invariant_report(net, budget=self.budget.child(seconds=STRUCTURE_SECONDS))
         facts["invariants"] = {
             "summary": invariants.explain(),
@@ -937,13 +959,20 @@ class _Checker:
                 "their sum is a positive weighting y with y^T C = 0",
             }
         else:
+            if self._spent(facts, "structural_boundedness", "structural boundedness"):
+                return facts
             bounded = structural_boundedness(
-                net, query_seconds=self.query_seconds, per_place=False, budget=self.budget.child()
+                net,
+                query_seconds=self.query_seconds,
+                per_place=False,
+                budget=self.budget.child(seconds=STRUCTURE_SECONDS),
             )
             facts["structural_boundedness"] = {
                 "verdict": bounded.structurally_bounded,
                 "summary": bounded.explain(),
             }
+        if self._spent(facts, "siphons_traps", "siphons and traps"):
+            return facts
         siphons = siphon_trap_check(net, budget=self.budget.child(seconds=STRUCTURE_SECONDS))
         summary = siphons.explain()
         if has_inputs(net):
@@ -954,6 +983,16 @@ class _Checker:
             )
         facts["siphons_traps"] = {"summary": summary}
         return facts
+
+    def _spent(self, facts: dict[str, object], key: str, what: str) -> bool:
+        """Whether the command's budget is spent; if so, mark ``key`` and every later
+        structural fact as not computed, naming the limit (an honest gap, not a hang)."""
+        if not self.budget.expired():
+            return False
+        reason = f"not computed: {self.budget.time_reason()} before {what}"
+        for later in STRUCTURE_FACTS[STRUCTURE_FACTS.index(key) :]:
+            facts[later] = {"verdict": None, "summary": reason}
+        return True
 
 
 # -- timed analysis -----------------------------------------------------------------------
