@@ -453,7 +453,10 @@ class _Checker:
                 budget=self.budget.child(seconds=COVERABILITY_SECONDS),
             )
         if result.bounded is False:
-            name = result.unbounded[0]
+            # The evidence is the pump of the first unbounded place that has one: the
+            # first place may have none while a later one does, and the detail promises
+            # a replayable trace whenever any place has one.
+            name = next((n for n in result.unbounded if n in result.pumps), result.unbounded[0])
             pump = result.pumps.get(name)
             evidence = None
             if pump is not None:
