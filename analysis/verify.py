@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 import numpy.typing as npt
 
-from analysis.budget import Budget
+from analysis.budget import Budget, memory_limit_reason, peak_resident_bytes, resident_bytes
 from analysis.coverability import coverability
 from analysis.inputs import has_inputs
 from analysis.progress import ProgressCallback
@@ -114,6 +114,9 @@ class VerifyOptions:
         timed: Also run timed analysis (`analysis.timed`) under these link bounds and
             budget: mission time bounds, time-out adequacy, ``within`` deadlines. None:
             untimed, and ``within`` assertions are inconclusive.
+        memory_limit: Bytes of resident memory the process may use (None: the caller's
+            budget's, or none). Past it the search stops, the verdicts it left open are
+            "inconclusive: memory limit of X reached after N states", never a crash.
     """
 
     max_states: int | None = 2_000_000
@@ -126,6 +129,7 @@ class VerifyOptions:
     max_deadlocks: int = DEFAULT_MAX_DEADLOCKS
     max_edges: int | None = DEFAULT_MAX_EDGES
     timed: TimedOptions | None = None
+    memory_limit: int | None = None
 
 
 def verify(
@@ -180,21 +184,34 @@ def run_verification(
     # proofs, termination, timed analysis, structure), not only the search. A stage
     # that finds it spent says so and the later ones report inconclusive, unrun.
     budget = (budget or Budget()).child(seconds=options.time_limit)
+    if options.memory_limit is not None:
+        budget.memory = options.memory_limit
     started = budget.clock()
     cells = len(net.places) * len(net.transitions)
     if cells > DENSE_CELL_LIMIT:
         return Verification(_too_large(net, cells, budget.clock() - started), None)
-    checker = _Checker(net, options, budget)
-    properties = [
-        checker.bounded(),
-        checker.deadlock(),
-        *checker.final_reachable(),
-        *checker.termination(),
-        checker.dead_transitions(),
-        checker.never_marked_places(),
-        *checker.resource_conflicts(),
-        *checker.assertions(),
+    try:
+        checker = _Checker(net, options, budget)
+    except MemoryError:
+        reason = f"not analysed: {memory_limit_reason(budget.memory)} before the search"
+        return Verification(_unanalysed(net, reason, budget.clock() - started), None)
+    stages: list[tuple[str, Callable[[], list[PropertyResult]]]] = [
+        ("boundedness", lambda: [checker.bounded()]),
+        ("deadlock", lambda: [checker.deadlock()]),
+        ("final markings", checker.final_reachable),
+        ("termination", checker.termination),
+        ("dead transitions", lambda: [checker.dead_transitions()]),
+        ("never marked places", lambda: [checker.never_marked_places()]),
+        ("resource conflicts", checker.resource_conflicts),
+        ("assertions", checker.assertions),
     ]
+    properties: list[PropertyResult] = []
+    for name, run in stages:
+        try:
+            properties += run()
+        except MemoryError:
+            properties.append(_out_of_memory(budget, checker, name))
+            break
     timed = None
     if options.timed is not None:
         left = budget.remaining()
@@ -203,7 +220,12 @@ def run_verification(
             limit = left if timed_options.time_limit_s is None else timed_options.time_limit_s
             timed_options = replace(timed_options, time_limit_s=min(limit, left))
         properties, timed = _timed(net, profiles, timed_options, properties)
-    structure = checker.structure() if options.structural else {}
+    structure: dict[str, object] = {}
+    if options.structural:
+        try:
+            structure = checker.structure()
+        except MemoryError:
+            structure = {"summary": f"not computed: {memory_limit_reason(budget.memory)}"}
     report = Report(
         net_name=net.name,
         digest=net.digest(),
@@ -217,6 +239,19 @@ def run_verification(
     return Verification(report, checker.space)
 
 
+def _out_of_memory(budget: Budget, checker: _Checker, stage: str) -> PropertyResult:
+    """The verdict of a stage stopped by a failed allocation: inconclusive, naming the
+    limit and what was explored; the properties after it were not analysed."""
+    reason = memory_limit_reason(budget.memory, checker.space.states)
+    return PropertyResult(
+        "analysis",
+        "every property analysed",
+        Verdict.INCONCLUSIVE,
+        checker.method,
+        f"inconclusive: {reason}, in {stage}; the properties after it were not analysed",
+    )
+
+
 def _too_large(net: Net, cells: int, seconds: float) -> Report:
     """Every property inconclusive, saying why: the encodings are dense in places x
     transitions, and past the limit they would exhaust memory rather than answer."""
@@ -225,6 +260,11 @@ def _too_large(net: Net, cells: int, seconds: float) -> Report:
         f"{cells:,} cells, over the {DENSE_CELL_LIMIT:,}-cell limit of the dense "
         "encodings; split the mission into phases and verify each"
     )
+    return _unanalysed(net, reason, seconds)
+
+
+def _unanalysed(net: Net, reason: str, seconds: float) -> Report:
+    """Every property inconclusive for ``reason``, with no state space."""
     keys = [("bounded", "the net is bounded"), ("deadlock", "no deadlock")]
     return Report(
         net_name=net.name,
@@ -278,6 +318,7 @@ class _Checker:
             # The search gets a share of the command's limit, so the proofs that need
             # no complete state space (the state equation, coverability) still run.
             time_limit = min(time_limit, budget.limit * SEARCH_SHARE)
+        before = resident_bytes()
         self.space: StateSpace = explore(
             net,
             max_states=max_states,
@@ -286,6 +327,10 @@ class _Checker:
             visible=visible,
             progress=options.progress,
         )
+        # What the search really cost: the peak's growth over the resident memory
+        # before it (the peak of the whole process, so a larger earlier peak hides it:
+        # then the stored tables' figure is the better one, and is reported too).
+        self.search_bytes = max(0, peak_resident_bytes() - before)
         self.exact = self.space.complete and not self.space.reduced
         self.method = EXPLICIT_POR if self.space.reduced else EXPLICIT
         self._graph: StateGraph | GraphError | None = None
@@ -323,7 +368,8 @@ class _Checker:
             stopped_reason=space.stopped_reason,
             reduced=space.reduced,
             seconds=space.seconds,
-            bytes_per_state=space.bytes_per_state,
+            bytes_per_state=max(self.search_bytes / max(1, space.states), space.bytes_per_state),
+            stored_bytes_per_state=space.bytes_per_state,
         )
 
     def _incomplete(self) -> str:
