@@ -331,8 +331,8 @@ def add_budget_options(
     group = parser.add_argument_group("verification")
     texts = {
         "max_states": f"state budget of the explicit search (default {DEFAULTS['max_states']})",
-        "time_limit": "time limit of the explicit search, and of timed analysis "
-        f"(default {DEFAULTS['time_limit']:g})",
+        "time_limit": "time limit of the whole command: search, proofs, timed analysis "
+        f"and structure (default {DEFAULTS['time_limit']:g})",
         "max_edges": "edge budget of the reachability graph that the termination properties "
         "need, 12 bytes an edge; past it they are inconclusive "
         f"(default {DEFAULTS['max_edges']})",
