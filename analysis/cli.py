@@ -54,6 +54,7 @@ from analysis.cli_options import (
     add_search_options,
     add_timed_options,
     add_version_option,
+    memory_limit_of,
 )
 from analysis.outcome import EXIT_ERRORS, EXIT_INCONCLUSIVE, EXIT_OK, EXIT_USAGE
 from coral_lang.cliframe import command_parser, print_error, run_main, subcommands, writable_output
@@ -282,11 +283,22 @@ _COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
 def _dispatch(args: argparse.Namespace) -> int:
     if getattr(args, "explain", None) is not None:
         return _explain(args)
-    if args.command == "query":
-        from analysis.query_cli import run_query
+    from analysis.budget import bytes_text, memory_ceiling
 
-        return run_query(args)
-    return _COMMANDS[args.command](args)
+    limit = memory_limit_of(args)
+    # The hard safety net under the memory budget (see `memory_ceiling`); an allocation
+    # that still fails ends as an honest inconclusive, never a traceback or exit 1.
+    with memory_ceiling(limit):
+        try:
+            if args.command == "query":
+                from analysis.query_cli import run_query
+
+                return run_query(args)
+            return _COMMANDS[args.command](args)
+        except MemoryError:
+            shown = "the machine's memory" if limit is None else bytes_text(limit)
+            print_error(PROG, f"inconclusive: memory limit of {shown} reached")
+            return EXIT_INCONCLUSIVE
 
 
 def _explain(args: argparse.Namespace) -> int:

@@ -58,6 +58,8 @@ __all__ = [
     "add_search_options",
     "add_timed_options",
     "add_version_option",
+    "memory_amount",
+    "memory_limit_of",
     "output_conflict",
     "output_or_stdout",
     "read_conflict",
@@ -329,8 +331,8 @@ def add_budget_options(
     group = parser.add_argument_group("verification")
     texts = {
         "max_states": f"state budget of the explicit search (default {DEFAULTS['max_states']})",
-        "time_limit": "time limit of the explicit search, and of timed analysis "
-        f"(default {DEFAULTS['time_limit']:g})",
+        "time_limit": "time limit of the whole command: search, proofs, timed analysis "
+        f"and structure (default {DEFAULTS['time_limit']:g})",
         "max_edges": "edge budget of the reachability graph that the termination properties "
         "need, 12 bytes an edge; past it they are inconclusive "
         f"(default {DEFAULTS['max_edges']})",
@@ -347,7 +349,38 @@ def add_budget_options(
             metavar=metavar,
             help=helps.get(dest, texts[dest]),
         )
+    group.add_argument(
+        "--memory-limit",
+        type=memory_amount,
+        default=None,
+        metavar="BYTES",
+        help="resident memory the whole command may use, with a K, M or G suffix "
+        "(e.g. 200M); past it the search stops and its open verdicts are inconclusive "
+        "(default: 80%% of the cgroup's memory limit, else of the memory available)",
+    )
     return group
+
+
+def memory_amount(text: str) -> int:
+    """``--memory-limit``'s type: ``200M`` -> bytes (`analysis.budget.parse_bytes`)."""
+    from analysis.budget import parse_bytes
+
+    try:
+        return parse_bytes(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def memory_limit_of(args: argparse.Namespace) -> int | None:
+    """The command's memory limit: ``--memory-limit``, else the machine's default
+    (`analysis.budget.default_memory_limit`); None for commands without the option."""
+    if not hasattr(args, "memory_limit"):
+        return None
+    if args.memory_limit is not None:
+        return int(args.memory_limit)
+    from analysis.budget import default_memory_limit
+
+    return default_memory_limit()
 
 
 def add_search_options(parser: argparse.ArgumentParser) -> None:
@@ -463,6 +496,7 @@ class Settings:
             max_deadlocks=self.values["max_deadlocks"],
             max_edges=self.values["max_edges"],
             timed=self.timed_options(),
+            memory_limit=memory_limit_of(args),
         )
 
     def timed_options(self) -> TimedOptions | None:

@@ -46,14 +46,13 @@ Typical use::
 
 from __future__ import annotations
 
-import contextlib
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
 
-from analysis.budget import Budget, BudgetExceeded, work_limit_reason
+from analysis.budget import Budget, BudgetExceeded, memory_limit_reason, work_limit_reason
 from analysis.encoding import (
     MAX_FIELD_BITS,
     NEVER,
@@ -1544,8 +1543,12 @@ def _explore(
     _settle_allocator()
     explorer = _Explorer(cn, max_states, budget, reducer, progress, chunk, sleep_sets=sleep_sets)
     explorer.stop_when = stop_when
-    with contextlib.suppress(BudgetExceeded):  # a budget ran out; the reason is recorded
+    try:
         explorer.run()
+    except BudgetExceeded:  # a budget ran out; the reason is recorded
+        pass
+    except MemoryError:  # an allocation failed (memory limit or ceiling): say so, keep the rest
+        explorer.stopped = memory_limit_reason(budget.memory, explorer.store.size)
     seconds = budget.clock() - explorer.start
     store = explorer.store
     via = explorer.via.view[: store.size]

@@ -22,14 +22,14 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import TYPE_CHECKING, cast
 
 import numpy as np
 import numpy.typing as npt
 
-from analysis.budget import Budget
+from analysis.budget import Budget, memory_limit_reason, peak_resident_bytes, resident_bytes
 from analysis.coverability import coverability
 from analysis.inputs import has_inputs
 from analysis.progress import ProgressCallback
@@ -72,6 +72,8 @@ Predicate = Callable[[Markings], npt.NDArray[np.bool_]]
 EXPLICIT = "explicit state space"
 REALISED = "state equation, solution realised as a firing sequence"
 STRUCTURE_SECONDS = 2.0  # each structural computation; results say when they were cut off
+SEARCH_SHARE = 0.8  # of the command's time limit, for the explicit search; the rest: proofs
+STRUCTURE_FACTS = ("invariants", "structural_boundedness", "siphons_traps")
 QUICK_COVERABILITY_NODES = 2_000
 QUICK_COVERABILITY_SECONDS = 1.0
 COVERABILITY_SECONDS = 10.0
@@ -111,6 +113,9 @@ class VerifyOptions:
         timed: Also run timed analysis (`analysis.timed`) under these link bounds and
             budget: mission time bounds, time-out adequacy, ``within`` deadlines. None:
             untimed, and ``within`` assertions are inconclusive.
+        memory_limit: Bytes of resident memory the process may use (None: the caller's
+            budget's, or none). Past it the search stops, the verdicts it left open are
+            "inconclusive: memory limit of X reached after N states", never a crash.
     """
 
     max_states: int | None = 2_000_000
@@ -123,6 +128,7 @@ class VerifyOptions:
     max_deadlocks: int = DEFAULT_MAX_DEADLOCKS
     max_edges: int | None = DEFAULT_MAX_EDGES
     timed: TimedOptions | None = None
+    memory_limit: int | None = None
 
 
 def verify(
@@ -173,23 +179,49 @@ def run_verification(
             inconclusive).
     """
     options = options or VerifyOptions()
-    budget = budget or Budget()
+    # One budget for the whole command: ``time_limit`` bounds every stage (search,
+    # proofs, termination, timed analysis, structure), not only the search. A stage
+    # that finds it spent says so and the later ones report inconclusive, unrun.
+    budget = (budget or Budget()).child(seconds=options.time_limit)
+    if options.memory_limit is not None:
+        budget.memory = options.memory_limit
     started = budget.clock()
-    checker = _Checker(net, options, budget)
-    properties = [
-        checker.bounded(),
-        checker.deadlock(),
-        *checker.final_reachable(),
-        *checker.termination(),
-        checker.dead_transitions(),
-        checker.never_marked_places(),
-        *checker.resource_conflicts(),
-        *checker.assertions(),
+    try:
+        checker = _Checker(net, options, budget)
+    except MemoryError:
+        reason = f"not analysed: {memory_limit_reason(budget.memory)} before the search"
+        return Verification(_unanalysed(net, reason, budget.clock() - started), None)
+    stages: list[tuple[str, Callable[[], list[PropertyResult]]]] = [
+        ("boundedness", lambda: [checker.bounded()]),
+        ("deadlock", lambda: [checker.deadlock()]),
+        ("final markings", checker.final_reachable),
+        ("termination", checker.termination),
+        ("dead transitions", lambda: [checker.dead_transitions()]),
+        ("never marked places", lambda: [checker.never_marked_places()]),
+        ("resource conflicts", checker.resource_conflicts),
+        ("assertions", checker.assertions),
     ]
+    properties: list[PropertyResult] = []
+    for name, run in stages:
+        try:
+            properties += run()
+        except MemoryError:
+            properties.append(_out_of_memory(budget, checker, name))
+            break
     timed = None
     if options.timed is not None:
-        properties, timed = _timed(net, profiles, options.timed, properties)
-    structure = checker.structure() if options.structural else {}
+        left = budget.remaining()
+        timed_options = options.timed
+        if left is not None:
+            limit = left if timed_options.time_limit_s is None else timed_options.time_limit_s
+            timed_options = replace(timed_options, time_limit_s=min(limit, left))
+        properties, timed = _timed(net, profiles, timed_options, properties)
+    structure: dict[str, object] = {}
+    if options.structural:
+        try:
+            structure = checker.structure()
+        except MemoryError:
+            structure = {"summary": f"not computed: {memory_limit_reason(budget.memory)}"}
     report = Report(
         net_name=net.name,
         digest=net.digest(),
@@ -201,6 +233,45 @@ def run_verification(
         timed=timed,
     )
     return Verification(report, checker.space)
+
+
+def _out_of_memory(budget: Budget, checker: _Checker, stage: str) -> PropertyResult:
+    """The verdict of a stage stopped by a failed allocation: inconclusive, naming the
+    limit and what was explored; the properties after it were not analysed."""
+    reason = memory_limit_reason(budget.memory, checker.space.states)
+    return PropertyResult(
+        "analysis",
+        "every property analysed",
+        Verdict.INCONCLUSIVE,
+        checker.method,
+        f"inconclusive: {reason}, in {stage}; the properties after it were not analysed",
+    )
+
+
+def _unanalysed(net: Net, reason: str, seconds: float) -> Report:
+    """Every property inconclusive for ``reason``, with no state space."""
+    keys = [("bounded", "the net is bounded"), ("deadlock", "no deadlock")]
+    return Report(
+        net_name=net.name,
+        digest=net.digest(),
+        sources=net.sources,
+        statespace=StateSpaceFigures(
+            states=0,
+            edges=0,
+            max_tokens_place=0,
+            max_tokens_marking=0,
+            place_bounds={},
+            complete=False,
+            stopped_reason=reason,
+            reduced=False,
+            seconds=0.0,
+            bytes_per_state=0.0,
+        ),
+        properties=[
+            PropertyResult(key, title, Verdict.INCONCLUSIVE, "none", reason) for key, title in keys
+        ],
+        seconds=seconds,
+    )
 
 
 class _Checker:
@@ -228,6 +299,11 @@ class _Checker:
         if self.cover.bounded is False:
             max_states = min(max_states or UNBOUNDED_STATES, UNBOUNDED_STATES)
             time_limit = min(time_limit or UNBOUNDED_SECONDS, UNBOUNDED_SECONDS)
+        if time_limit is not None and budget.limit is not None:
+            # The search gets a share of the command's limit, so the proofs that need
+            # no complete state space (the state equation, coverability) still run.
+            time_limit = min(time_limit, budget.limit * SEARCH_SHARE)
+        before = resident_bytes()
         self.space: StateSpace = explore(
             net,
             max_states=max_states,
@@ -236,6 +312,10 @@ class _Checker:
             visible=visible,
             progress=options.progress,
         )
+        # What the search really cost: the peak's growth over the resident memory
+        # before it (the peak of the whole process, so a larger earlier peak hides it:
+        # then the stored tables' figure is the better one, and is reported too).
+        self.search_bytes = max(0, peak_resident_bytes() - before)
         self.exact = self.space.complete and not self.space.reduced
         self.method = EXPLICIT_POR if self.space.reduced else EXPLICIT
         self._graph: StateGraph | GraphError | None = None
@@ -274,7 +354,8 @@ class _Checker:
             reduced=space.reduced,
             reduction_note=space.reduction_note,
             seconds=space.seconds,
-            bytes_per_state=space.bytes_per_state,
+            bytes_per_state=max(self.search_bytes / max(1, space.states), space.bytes_per_state),
+            stored_bytes_per_state=space.bytes_per_state,
         )
 
     def _incomplete(self) -> str:
@@ -354,6 +435,10 @@ class _Checker:
         its counts replays on the net and ends in a bad marking (then it is real)."""
         from analysis import stateeq
 
+        if self.budget.expired():
+            # Building the equation alone takes seconds on a wide net: not past the limit.
+            reason = f"not run: {self.budget.time_reason()} before the state equation"
+            return stateeq.Unknown(bad=bad, reason=reason), None
         result = stateeq.check_unreachable(
             self.net,
             bad,
@@ -400,7 +485,10 @@ class _Checker:
                 budget=self.budget.child(seconds=COVERABILITY_SECONDS),
             )
         if result.bounded is False:
-            name = result.unbounded[0]
+            # The evidence is the pump of the first unbounded place that has one: the
+            # first place may have none while a later one does, and the detail promises
+            # a replayable trace whenever any place has one.
+            name = next((n for n in result.unbounded if n in result.pumps), result.unbounded[0])
             pump = result.pumps.get(name)
             evidence = None
             if pump is not None:
@@ -871,7 +959,9 @@ class _Checker:
     # -- structure --------------------------------------------------------------------------
 
     def structure(self) -> dict[str, object]:
-        """Structural facts for the report; each computation has its own time limit."""
+        """Structural facts for the report; each computation has its own time slice,
+        inside the command's budget: once that is spent the remaining ones are
+        reported as not computed, naming the limit, instead of running."""
         from analysis.invariants import invariant_report
         from analysis.siphons import siphon_trap_check
         from analysis.structural import classify, structural_boundedness
@@ -882,8 +972,10 @@ class _Checker:
             "transitions": len(net.transitions),
             "arcs": sum(len(t.inputs) + len(t.outputs) for t in net.transitions),
         }
-        net_class = classify(net)
-        facts["class"] = list(net_class.names())
+        # Near-linear in the arcs (see `classify`): always computed.
+        facts["class"] = list(classify(net).names())
+        if self._spent(facts, "invariants", "invariants"):
+            return facts
         invariants = invariant_report(net, budget=self.budget.child(seconds=STRUCTURE_SECONDS))
         facts["invariants"] = {
             "summary": invariants.explain(),
@@ -902,13 +994,20 @@ class _Checker:
                 "their sum is a positive weighting y with y^T C = 0",
             }
         else:
+            if self._spent(facts, "structural_boundedness", "structural boundedness"):
+                return facts
             bounded = structural_boundedness(
-                net, query_seconds=self.query_seconds, per_place=False, budget=self.budget.child()
+                net,
+                query_seconds=self.query_seconds,
+                per_place=False,
+                budget=self.budget.child(seconds=STRUCTURE_SECONDS),
             )
             facts["structural_boundedness"] = {
                 "verdict": bounded.structurally_bounded,
                 "summary": bounded.explain(),
             }
+        if self._spent(facts, "siphons_traps", "siphons and traps"):
+            return facts
         siphons = siphon_trap_check(net, budget=self.budget.child(seconds=STRUCTURE_SECONDS))
         summary = siphons.explain()
         if has_inputs(net):
@@ -919,6 +1018,16 @@ class _Checker:
             )
         facts["siphons_traps"] = {"summary": summary}
         return facts
+
+    def _spent(self, facts: dict[str, object], key: str, what: str) -> bool:
+        """Whether the command's budget is spent; if so, mark ``key`` and every later
+        structural fact as not computed, naming the limit (an honest gap, not a hang)."""
+        if not self.budget.expired():
+            return False
+        reason = f"not computed: {self.budget.time_reason()} before {what}"
+        for later in STRUCTURE_FACTS[STRUCTURE_FACTS.index(key) :]:
+            facts[later] = {"verdict": None, "summary": reason}
+        return True
 
 
 # -- timed analysis -----------------------------------------------------------------------
