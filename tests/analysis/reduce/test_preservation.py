@@ -47,13 +47,15 @@ def series_nets(draw: st.DrawFn) -> Net:
     for t in net.transitions:
         inputs, outputs = list(t.inputs), list(t.outputs)
         extra: list[Transition] = []
-        if outputs and draw(st.booleans()):
+        split_out: bool = draw(st.booleans())
+        split_in: bool = draw(st.booleans())
+        if outputs and split_out:
             p, w = outputs.pop(0)
             q = f"{t.name}_out"
             places.append(Place(q))
             outputs.append((q, w))
             extra.append(Transition(f"{t.name}_fwd", inputs=((q, w),), outputs=((p, w),)))
-        if inputs and draw(st.booleans()):
+        if inputs and split_in:
             p, w = inputs.pop(0)
             q = f"{t.name}_in"
             places.append(Place(q))
