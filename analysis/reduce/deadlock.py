@@ -15,10 +15,14 @@ import numpy as np
 import numpy.typing as npt
 
 from analysis.budget import Budget
-from analysis.reduce.driver import Reduction, reduce_net
+from analysis.reduce.driver import Reduction, reduce_net, reducible
 from analysis.reduce.goal import Goal
 from analysis.statespace import explore
 from coral_lang.net import Net
+
+WITNESS_FAILED = "the reduced net's deadlock witness does not replay on the original net"
+"""``stopped_reason`` when a mapped-back witness fails its replay (a reduction bug: the
+caller falls back to the unreduced search rather than trust the verdict)."""
 
 EARLY_STOP_TRANSITIONS = 2000
 """Nets with at most this many transitions stop at the first dead marking stored; the
@@ -95,9 +99,14 @@ def decide_deadlock(
     budget: Budget | None = None,
     reduction: Reduction | None = None,
 ) -> DeadlockAnswer:
-    """Reduce ``net`` for the deadlock question, explore, and map the answer back."""
-    red = reduction or reduce_net(net, Goal.deadlock())
-    first_dead = _FirstDead(red.net) if len(red.net.transitions) <= EARLY_STOP_TRANSITIONS else None
+    """Reduce ``net`` for the deadlock question, explore, and map the answer back.
+
+    ``budget`` bounds the reduction and the search; a net with operator inputs is not
+    reduced, and its dead states are found by `explore`'s own rule (terminal states).
+    """
+    red = reduction or reduce_net(net, Goal.deadlock(), budget=budget)
+    early = reducible(net) and len(red.net.transitions) <= EARLY_STOP_TRANSITIONS
+    first_dead = _FirstDead(red.net) if early else None
     space = explore(red.net, max_states=max_states, budget=budget, stop_when=first_dead)
     dead = first_dead.found if first_dead is not None else None
     if dead is None and space.deadlocks.size:
@@ -105,8 +114,8 @@ def decide_deadlock(
     if dead is not None:
         trace = red.expand_trace(space.trace_names(dead))
         reached = replay(net, trace)
-        if reached is None or not is_dead(net, reached):
-            raise AssertionError(f"reduced deadlock witness does not replay on {net.name}")
+        if reached is None or not is_dead(net, reached):  # a rule is wrong: say so, decide nothing
+            return DeadlockAnswer(None, None, red, space.states, WITNESS_FAILED)
         return DeadlockAnswer(True, trace, red, space.states)
     if space.complete:
         return DeadlockAnswer(False, None, red, space.states)

@@ -1,7 +1,7 @@
 """Apply the reduction rules to a fixpoint and map answers back to the original net.
 
 `reduce_net` runs the rule families (`dead`, `implicit`, `agglomerate`, `fusion`)
-until none applies, the round limit is hit or the deadline passes (each rule is
+until none applies, the round limit is hit or the budget's deadline passes (each rule is
 sound on its own, so stopping between two rules is always safe). The `Reduction` it
 returns expands a reduced firing sequence into an original one (`expand_trace`): a
 deadlock witness of the reduced net becomes a replayable witness of the original.
@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from analysis.budget import Budget
 from analysis.inputs import has_inputs
 from analysis.reduce.agglomerate import agglomerate_series
 from analysis.reduce.dead import (
@@ -68,7 +69,7 @@ class Reduction:
         )
 
 
-def _reducible(net: Net) -> bool:
+def reducible(net: Net) -> bool:
     """Only plain P/T semantics: operator inputs, capacities and priorities change
     what is enabled, and the rules' arguments do not cover them."""
     return not (
@@ -78,29 +79,35 @@ def _reducible(net: Net) -> bool:
     )
 
 
+def _expired(budget: Budget | None) -> bool:
+    left = None if budget is None else budget.remaining()
+    return left is not None and left <= 0
+
+
 def reduce_net(
-    net: Net, goal: Goal, *, deadline: float | None = None, max_rounds: int = 100
+    net: Net, goal: Goal, *, budget: Budget | None = None, max_rounds: int = 100
 ) -> Reduction:
     """Reduce ``net`` preserving ``goal``.
 
     Args:
         net: the original net (unchanged).
         goal: the property to preserve and what it observes.
-        deadline: a `time.monotonic` instant after which no further rule is started.
+        budget: once its deadline passes no further rule is started (the net reduced
+            so far is returned: every rule is sound on its own).
         max_rounds: rounds of all rules at most.
     """
     start = time.monotonic()
-    if not _reducible(net):
+    if not reducible(net):
         ident: dict[str, tuple[str, ...]] = {t.name: (t.name,) for t in net.transitions}
         return Reduction(net, net, goal, ident, {}, time.monotonic() - start)
     w = WorkNet(net, goal)
     for _ in range(max_rounds):
         changed = False
         for rule in RULES:
-            if deadline is not None and time.monotonic() > deadline:
+            if _expired(budget):
                 break
             changed = rule(w) or changed
-        if not changed or (deadline is not None and time.monotonic() > deadline):
+        if not changed or _expired(budget):
             break
     return Reduction(
         net, w.to_net(), goal, dict(w.expand), dict(w.applied), time.monotonic() - start
