@@ -670,6 +670,10 @@ class QuerySession:
         examinations); when its budget stops it, a z3 proof that no dead marking is
         reachable (state equation and traps: answers FALSE without exploring), then a
         deadlock-preserving stubborn-set search, which often stores far fewer markings."""
+        if self.space is None and not self.out_of_time():
+            by_reduction = self._deadlock_by_reduction()
+            if by_reduction is not None:
+                return by_reduction
         space = self.full_space()
         techniques: tuple[str, ...] = EXPLICIT
         if not space.complete and not space.has_deadlock and not self.out_of_time():
@@ -689,6 +693,27 @@ class QuerySession:
         if space.complete:
             return Answer("", False, techniques, method="global")
         return self._incomplete(space)
+
+    def _deadlock_by_reduction(self) -> Answer | None:
+        """Structural reductions first (`analysis.reduce`): the reduced net is searched
+        within half of what is left of the budget, its witness replayed on this net;
+        ``None`` when that does not decide (the unreduced searches follow)."""
+        from analysis.reduce import decide_deadlock
+        from analysis.reduce.driver import reducible
+
+        if not reducible(self.net):
+            return None
+        left = self.remaining()
+        answer = decide_deadlock(
+            self.net,
+            max_states=self.limits.max_states,
+            budget=self.budget.child(seconds=None if left is None else left / 2),
+        )
+        if answer.deadlock is None:
+            return None
+        trace = tuple(answer.trace) if answer.trace is not None else None
+        techniques = ("STRUCTURAL_REDUCTION", *EXPLICIT)
+        return Answer("", answer.deadlock, techniques, method="global", trace=trace)
 
     def _deadlock_free_by_state_equation(self) -> Answer | None:
         """FALSE when the state equation with trap constraints proves that no dead
