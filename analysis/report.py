@@ -306,8 +306,9 @@ class StateSpaceFigures:
     """What a stored state really cost: the growth of the process's peak resident
     memory over the search (peak RSS after it minus RSS before it), per state."""
     stored_bytes_per_state: float = 0.0
-    """What the explorer's own tables (keys, hash table, arriving transitions) take, per state: less
-    than `bytes_per_state`, which also counts temporaries and the allocator's slack."""
+    """What the explorer's own tables (keys, hash table, arriving transitions) take, per
+    state: less than `bytes_per_state`, which also counts temporaries and the
+    allocator's slack."""
     reduction_note: str | None = None
 
     def to_dict(self) -> dict[str, object]:
