@@ -46,13 +46,21 @@ Typical use::
 
 from __future__ import annotations
 
+import ctypes
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
 
-from analysis.budget import Budget, BudgetExceeded, memory_limit_reason, work_limit_reason
+from analysis.budget import (
+    Budget,
+    BudgetExceeded,
+    memory_limit_reason,
+    resident_bytes,
+    work_limit_reason,
+)
 from analysis.encoding import (
     MAX_FIELD_BITS,
     NEVER,
@@ -301,6 +309,13 @@ of the others dominates, and the lookup only adds a pass and a sort)..."""
 KEYED_MIN = 256
 """... and there are at least this many transitions: below, testing every transition in
 every marking costs less than the lookup (Referendum, 31 transitions: 40 % slower)."""
+
+INSERT_BYTES = 64
+"""Bytes of temporaries per candidate while a batch is inserted (hashes, slots,
+positions, probe results), beside its key and its successor's column."""
+
+BLOCK_TEMPORARIES = 64 << 20
+"""Bytes of temporaries a block-wise pass over the store (a re-packing) may hold."""
 
 DENSE_DELTA_CELLS = 1 << 24
 """Largest places x transitions for a dense effect matrix (successor columns by one
@@ -657,6 +672,7 @@ class _Explorer:
         self.tokens_exact = int(np.count_nonzero(fnet.exact))  # one token in each
         self.max_marking = int(cn.initial.sum())
         self.edges = 0
+        self.offered = 0  # candidates offered to the store so far
         self.layer_starts = [0]
         self.stopped: str | None = None
         wanted = sleep_sets and reducer is None and cn.n_transitions > 1
@@ -890,7 +906,14 @@ class _Explorer:
                 " explorer counts exactly (the net may be unbounded)"
             )
             raise BudgetExceeded(self.stopped)
-        packed = self.layout.repack(self.store.keys, layout)
+        keys = self.store.keys
+        if layout.n_words == self.layout.n_words:
+            # In place, a block at a time: no second copy of the store.
+            self.guard(BLOCK_TEMPORARIES)
+            packed = self.layout.repack(keys, layout, out=keys)
+        else:
+            self.guard(BLOCK_TEMPORARIES, keys.shape[0] * 8 * layout.n_words)
+            packed = self.layout.repack(keys, layout)
         self._set_layout(layout)
         self.store.rekey(packed)
         for i, block in enumerate(blocks):
@@ -968,6 +991,7 @@ class _Explorer:
         """Store the successors along ``edges`` (their ``keys`` if already computed);
         new columns go to ``out``."""
         trans, src = edges
+        self.guard_insert(trans.size)
         if keys is None:
             keys = self.store.keys.take(base + src, axis=0)
             keys += self.key_delta.take(trans, axis=0)
@@ -1019,6 +1043,9 @@ class _Explorer:
         widen)."""
         keys = None
         fired: Edges | None = None
+        n = cols.shape[1]
+        per_state = self.edges / max(1, self.store.size)
+        self.guard(n * self.tested + int(n * per_state) * (8 * self.layout.n_words + 32))
         if self.reducer is not None:
             return self.reduced_step(cols, base, out)
         while True:
@@ -1188,9 +1215,15 @@ class _Explorer:
                 wide = width * self.tested > CELLS_PER_STEP
                 if spec.keys and (wide or (self.index.keyed and width > NARROW_WIDTH)):
                     break
+                self.guard(width * self.tested)  # the deadline, between levels too
                 every, cells = self.narrow_edges(current)
                 counts = np.bincount(every[1], minlength=current.shape[1])
                 trans, src = self.fired_edges(every, None, current.shape[1])
+                level = src.size * (self.fnet.n_fields * self.dtype.itemsize + 24)
+                temporaries, grown = self.insert_bytes(spec.total + src.size)
+                if spec.keys and not self.fits(level + temporaries, grown):
+                    break  # store the levels so far instead: their candidates are fewer
+                self.guard(level)
                 new = self.successor_cols(current, src, trans)
                 over = new > self.last_value
                 if over.any():
@@ -1219,6 +1252,7 @@ class _Explorer:
         next frontier and its first state number."""
         self.sleep_next = False
         spec = self.speculate(cols, base)
+        self.guard_insert(spec.total)
         keys, new_cols, _, trans, counts = spec.joined()
         limit = None if self.max_states is None else self.max_states - self.store.size
         added = self.store.add(keys, limit)
@@ -1272,9 +1306,52 @@ class _Explorer:
             self.progress(
                 ProgressInfo(self.store.size, self.edges, queued, len(self.layer_starts), now)
             )
-        if self.budget.expired():
-            self.stopped = self.budget.time_reason(self.store.size, "state")
+        self.guard()
+
+    def guard(self, extra_bytes: int = 0, grown_bytes: int = 0) -> None:
+        """Stop, with the budget's reason and every state stored so far kept, when the
+        deadline has passed, the process is over its memory limit, or what the caller
+        is about to allocate would take it over: ``extra_bytes`` of temporaries (from
+        the heap, which reuses its free blocks first: `heap_free_bytes`) and
+        ``grown_bytes`` of the store's own arrays (fresh pages). Called before every
+        step that allocates much or runs long, so a search ends within one bounded
+        step of its limits; nothing is changed yet when it raises."""
+        budget = self.budget
+        if budget.expired():
+            self.stopped = budget.time_reason(self.store.size, "state")
             raise BudgetExceeded(self.stopped)
+        if budget.memory is not None and extra_bytes + grown_bytes > 0:
+            try:
+                budget.check_memory(max(0, extra_bytes - heap_free_bytes()) + grown_bytes)
+            except BudgetExceeded:
+                self.stopped = memory_limit_reason(budget.memory, self.store.size)
+                raise BudgetExceeded(self.stopped) from None
+
+    def fits(self, extra_bytes: int, grown_bytes: int) -> bool:
+        """Whether the allocations `guard` is told about keep the process within its
+        memory limit."""
+        limit = self.budget.memory
+        if limit is None:
+            return True
+        extra = max(0, extra_bytes - heap_free_bytes()) + grown_bytes
+        return resident_bytes() + extra <= limit
+
+    def insert_bytes(self, candidates: int) -> tuple[int, int]:
+        """Bytes that storing up to ``candidates`` successors may allocate: the
+        insertion's temporaries, and the growth of the store (keys, table) and of
+        ``via``."""
+        grown = self.store.growth_bytes(candidates) + self.via.growth_bytes(candidates)
+        # The new states' columns (and sleep sets) are kept for the next layer: twice as
+        # many as the share of new states among the candidates so far predicts.
+        new = min(candidates, 2 * candidates * self.store.size // max(1, self.offered) + 1024)
+        sleep_words = 0 if self.sleep is None else self.sleep.words
+        grown += new * (self.fnet.n_fields * self.dtype.itemsize + 8 * sleep_words)
+        return candidates * (8 * self.layout.n_words + INSERT_BYTES), grown
+
+    def guard_insert(self, candidates: int) -> None:
+        """`guard` before storing up to ``candidates`` successors (`insert_bytes`)."""
+        self.guard(*self.insert_bytes(candidates))
+        self.offered += candidates
 
 
 def _unsigned(dtype: np.dtype[np.integer]) -> np.dtype[np.unsignedinteger]:
@@ -1345,6 +1422,53 @@ def _coalesce(
                 joined_sleeps.append(part[0] if len(part) == 1 else np.concatenate(part))
             start, width = k + 1, 0
     return joined, (joined_sleeps if sleeps is not None else None)
+
+
+class _MallInfo2(ctypes.Structure):
+    """glibc's ``struct mallinfo2`` (all fields ``size_t``)."""
+
+    _fields_ = [
+        (name, ctypes.c_size_t)
+        for name in [
+            "arena",
+            "ordblks",
+            "smblks",
+            "hblks",
+            "hblkhd",
+            "usmblks",
+            "fsmblks",
+            "uordblks",
+            "fordblks",
+            "keepcost",
+        ]
+    ]
+
+
+def _mallinfo2() -> Callable[[], _MallInfo2] | None:
+    """glibc's ``mallinfo2`` (2.33 and later), or None elsewhere."""
+    try:
+        function = ctypes.CDLL(None).mallinfo2
+    except (AttributeError, OSError):
+        return None
+    function.restype = _MallInfo2
+    function.argtypes = []
+    return cast(Callable[[], _MallInfo2], function)
+
+
+_MALLINFO2 = _mallinfo2()
+
+
+def heap_free_bytes() -> int:
+    """Bytes the C allocator holds free (glibc: ``mallinfo2().fordblks``; 0 elsewhere).
+
+    glibc keeps freed blocks (see `_settle_allocator`), so after the first large step
+    much of the resident memory is free heap that the next step's temporaries reuse
+    without growing the process: a memory check counts an allocation only beyond it,
+    or it would stop a search long before its limit (by a factor of 5 on 2^21
+    toggles with 40 MiB to spare)."""
+    if _MALLINFO2 is None:
+        return 0
+    return int(_MALLINFO2().fordblks)
 
 
 def _settle_allocator() -> None:

@@ -192,10 +192,29 @@ class Growable:
         """Rows that fit without copying."""
         return int(self._data.shape[0])
 
+    @property
+    def row_bytes(self) -> int:
+        """Bytes of one row."""
+        return int(self._data.itemsize * np.prod(self._data.shape[1:], dtype=np.int64))
+
+    def _grown_rows(self, rows: int) -> int:
+        """The capacity after growing to hold ``rows`` rows (`GROWTH` steps: a copy
+        past the reservation briefly holds old and new arrays, 2.5x rather than 3x)."""
+        return max(rows, int(self._data.shape[0] * GROWTH) + 1)
+
+    def growth_bytes(self, rows: int) -> int:
+        """Bytes of memory that making room for ``rows`` more rows would newly touch
+        or allocate: the rows' own pages within the reservation, a whole new array
+        past it. What a search asks its memory budget about before it grows."""
+        end = self.size + rows
+        if end <= self._data.shape[0]:
+            return rows * self.row_bytes
+        return self._grown_rows(end) * self.row_bytes
+
     def ensure(self, rows: int) -> None:
-        """Room for ``rows`` rows (copies only past the reservation, doubling)."""
+        """Room for ``rows`` rows (copies only past the reservation, by `GROWTH`)."""
         if rows > self._data.shape[0]:
-            shape = (max(rows, 2 * self._data.shape[0]), *self._data.shape[1:])
+            shape = (self._grown_rows(rows), *self._data.shape[1:])
             grown = np.zeros(shape, dtype=self._data.dtype)
             grown[: self.size] = self._data[: self.size]
             self._data = grown
@@ -301,6 +320,20 @@ class KeyStore:
             self._keys = Growable((self.n_words,), np.uint64, self._keys.capacity)
             self._keys.append(keys)
         self._resize(self._slots)
+
+    def growth_bytes(self, more: int) -> int:
+        """Bytes of memory that storing ``more`` new states (at most) would newly touch
+        or allocate: their keys, and the table grown to hold them at `MAX_LOAD` (the
+        slots beyond the current table within the buffer, a new buffer past it)."""
+        total = self._keys.growth_bytes(more)
+        slots = self._slots
+        while self.size + more > MAX_LOAD * slots:
+            slots = self._grown(slots)
+        if slots > self._slots:
+            item = self._buffer.itemsize
+            extra = slots if slots > self._buffer.size else slots - self._slots
+            total += extra * item
+        return total
 
     # -- slots -----------------------------------------------------------------------
 

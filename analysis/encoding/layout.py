@@ -149,11 +149,15 @@ class Layout:
         """This layout with other field widths."""
         return Layout.build(bits, self.members, self.onehot, self.n_places, self.first)
 
-    def repack(self, keys: KeyArray, other: Layout) -> KeyArray:
+    def repack(self, keys: KeyArray, other: Layout, out: KeyArray | None = None) -> KeyArray:
         """``keys`` (packed with this layout) packed with ``other``, which has the same
         fields, possibly wider: field by field, never through full markings, in blocks
-        of rows (a widening re-packs the whole store)."""
-        out = np.empty((keys.shape[0], other.n_words), dtype=np.uint64)
+        of rows (a widening re-packs the whole store). ``out`` receives them when given,
+        which may be ``keys`` itself when ``other`` has as many words (each block is read
+        whole before it is written): a widening then needs no second copy of the store."""
+        if out is None:
+            out = np.empty((keys.shape[0], other.n_words), dtype=np.uint64)
+        assert out.shape == (keys.shape[0], other.n_words), "repack: wrong output shape"
         fields = len(self.bits)
         step = 1 << 16 if fields <= FIELD_LOOP else max(1, (1 << 22) // fields)
         for start in range(0, keys.shape[0], step):

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 import analysis.encoding as encoding
 import analysis.encoding.keystore as keystore
 import analysis.statespace as statespace
-from analysis.budget import Budget
+from analysis.budget import Budget, memory_limit_reason, resident_bytes, time_limit_reason
 from analysis.encoding import CompactNet, KeyStore, Layout
 from analysis.graph import to_networkx
 from analysis.progress import ProgressInfo, ProgressPrinter
@@ -171,8 +171,52 @@ def test_time_limit_is_respected_with_a_fake_clock() -> None:
     budget = Budget(5.0, clock=lambda: float(next(ticks)))
     space = explore(_pump(), max_states=None, budget=budget, chunk=1)
     assert not space.complete
-    assert space.stopped_reason == f"time limit of 5 s reached after {space.states} states"
+    assert space.stopped_reason == time_limit_reason(5.0, space.states)
     assert space.states < 20
+
+
+def test_narrow_rounds_check_the_deadline_between_levels() -> None:
+    """A deep chain is explored many layers per store insertion (narrow rounds): the
+    deadline is checked between those layers, not only after a round of hundreds."""
+    ticks = itertools.count()
+    budget = Budget(0.05, clock=lambda: next(ticks) / 1000)  # a millisecond a reading
+    chain = Net("countdown", (Place("c", 100_000),), (Transition("t", (("c", 1),), ()),))
+    space = explore(chain, max_states=None, budget=budget)
+    assert not space.complete
+    assert space.stopped_reason == time_limit_reason(0.05, space.states)
+    assert 0 < space.states <= 64  # a round would store 2,049 before its first check
+    assert space.trace_to(space.states - 1) == [0] * (space.states - 1)
+
+
+def _toggles(n: int) -> Net:
+    """``n`` independent on/off switches: ``2**n`` markings."""
+    places = tuple(p for i in range(n) for p in (Place(f"a{i}", 1), Place(f"b{i}")))
+    transitions = tuple(
+        t
+        for i in range(n)
+        for t in (
+            Transition(f"on{i}", ((f"a{i}", 1),), ((f"b{i}", 1),)),
+            Transition(f"off{i}", ((f"b{i}", 1),), ((f"a{i}", 1),)),
+        )
+    )
+    return Net("toggles", places, transitions)
+
+
+def test_a_memory_budget_stops_the_search_before_it_is_passed() -> None:
+    """Every large allocation of the search (store growth, a step's temporaries) asks
+    the memory budget first: the search stops under the limit, says which limit, and
+    keeps a consistent partial space (traces replay). 2^21 markings need about 40 MiB
+    of store, more than the 24 MiB allowed."""
+    net = _toggles(21)
+    explore(net, max_states=1000)  # the first run's imports and caches are not counted
+    limit = resident_bytes() + (24 << 20)
+    space = explore(net, max_states=None, budget=Budget(memory=limit))
+    assert not space.complete and 1000 < space.states < 1 << 21
+    assert space.stopped_reason == memory_limit_reason(limit, space.states)
+    # within one step of the limit (glibc keeps what the steps freed: this is the peak)
+    assert resident_bytes() <= limit + (8 << 20)
+    last = space.states - 1
+    assert _replay(net, space.trace_to(last)) == space.marking(last)
 
 
 def test_time_limit_is_respected_on_the_real_clock() -> None:
