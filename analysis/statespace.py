@@ -17,7 +17,9 @@ Breadth first, one layer at a time, vectorised over the frontier with numpy:
 4. the keys go through a vectorised open-addressing set (`KeyStore`) that numbers new
    markings as they are first met, so state numbers grow with BFS depth
    (``layer_starts``) and parents always precede their children;
-5. only new markings get a column (``parent column + delta``) for the next layer.
+5. only new markings get a column (``parent column + delta``), for the bounds; the
+   next layer is not kept as columns but unpacked from the stored keys a block at a
+   time (`Layout.fields`): the states of a layer are numbered consecutively.
 
 Narrow layers (deep state spaces: long missions, counters) are explored several layers
 per insertion instead, see `_Explorer.speculate`: numpy's cost per call, not per
@@ -1142,41 +1144,40 @@ class _Explorer:
         if too_large is not None:
             self.stopped = too_large
             raise BudgetExceeded(too_large)
-        # A layer is a list of column blocks (as produced, never joined into one array:
-        # the widest layers are the largest temporaries) with their sleep sets.
-        layer: list[npt.NDArray[np.integer]] = [self.fnet.initial[:, None].astype(self.dtype)]
+        # A layer is the states ``base ...`` up to the store's end (they are numbered in
+        # BFS order), unpacked from their keys a block at a time: no layer is kept as
+        # columns, which on wide layers cost more than the store's own bytes per state.
         sleeps: list[npt.NDArray[np.uint64]] | None = None
         base = 0
-        while layer:
-            width = sum(block.shape[1] for block in layer)
+        while base < self.store.size:
+            width = self.store.size - base
             if self.narrow(width):
-                frontier = np.concatenate([b.astype(self.dtype, copy=False) for b in layer], 1)
-                frontier, base = self.narrow_round(frontier, base)
-                layer, sleeps = ([frontier] if frontier.shape[1] else []), None
+                _, base = self.narrow_round(self.frontier(base, width), base)
+                sleeps = None
                 continue
-            out: list[npt.NDArray[np.integer]] = []
             self.next_sleep = []
             self.sleep_next = self.sleep is not None and self.edges >= SLEEP_MIN_DEGREE * base
-            done = 0
-            for k in range(len(layer)):
-                block, layer[k] = layer[k], layer[k][:, :0]  # let expanded blocks go
-                sleep = None if sleeps is None else sleeps[k]
-                c = 0
-                while c < block.shape[1]:
-                    size = self.block_size()
-                    cols = block[:, c : c + size].astype(self.dtype, copy=False)
-                    part = None if sleep is None else sleep[c : c + size]
-                    cols = self.step(cols, part, base + done + c, out)
-                    if self.stopped:
-                        raise BudgetExceeded(self.stopped)
-                    c += cols.shape[1]
-                    self.check_time(width - done - c, out)
-                done += block.shape[1]
+            sleep_all = None if not sleeps else np.concatenate(sleeps)
+            sleeps = None
+            c = 0
+            while c < width:
+                size = min(self.block_size(), width - c)
+                self.guard(size * self.fnet.n_fields * (self.dtype.itemsize + 8))
+                cols = self.frontier(base + c, size)
+                part = None if sleep_all is None else sleep_all[c : c + size]
+                self.step(cols, part, base + c, [])
+                if self.stopped:
+                    raise BudgetExceeded(self.stopped)
+                c += size
+                self.check_time(self.store.size - base - c, [])
             base += width
             sleeps = self.next_sleep if self.sleep_next else None
-            layer, sleeps = _coalesce(out, sleeps, self.block_size())
-            if layer:
+            if base < self.store.size:
                 self.layer_starts.append(base)
+
+    def frontier(self, start: int, n: int) -> npt.NDArray[np.integer]:
+        """Field columns of the states ``start .. start + n - 1``, from their keys."""
+        return self.layout.fields(self.store.keys[start : start + n], self.dtype)
 
     def narrow(self, width: int) -> bool:
         """Whether a layer of ``width`` markings is explored by a narrow round: few
@@ -1399,29 +1400,6 @@ def _group_matrix(
             ok &= _test(cols.take(group.fields[:, k], axis=0), checks[k])
         out[group.transitions] = ok
     return out
-
-
-def _coalesce(
-    blocks: list[npt.NDArray[np.integer]],
-    sleeps: list[npt.NDArray[np.uint64]] | None,
-    size: int,
-) -> tuple[list[npt.NDArray[np.integer]], list[npt.NDArray[np.uint64]] | None]:
-    """The blocks of a new layer (one per step that found states, often small) joined
-    into runs of about ``size`` columns: fewer, larger steps for the next layer, without
-    copying the widest layers whole."""
-    joined: list[npt.NDArray[np.integer]] = []
-    joined_sleeps: list[npt.NDArray[np.uint64]] = []
-    start = width = 0
-    for k, block in enumerate(blocks):
-        width += block.shape[1]
-        if width >= size or k == len(blocks) - 1:
-            run = blocks[start : k + 1]
-            joined.append(run[0] if len(run) == 1 else np.concatenate(run, axis=1))
-            if sleeps is not None:
-                part = sleeps[start : k + 1]
-                joined_sleeps.append(part[0] if len(part) == 1 else np.concatenate(part))
-            start, width = k + 1, 0
-    return joined, (joined_sleeps if sleeps is not None else None)
 
 
 class _MallInfo2(ctypes.Structure):

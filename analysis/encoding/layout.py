@@ -288,6 +288,25 @@ class Layout:
             fields[:, onehot] = fields[:, onehot] == self.coefficient[onehot]
         return fields.astype(dtype)
 
+    def fields(self, keys: KeyArray, dtype: npt.DTypeLike) -> npt.NDArray[np.integer]:
+        """Field values of ``keys`` as columns ``(fields, n)`` of ``dtype`` (what
+        `FieldNet.values` gives from markings), read straight from the key bits: a
+        frontier kept as state numbers is unpacked a block at a time."""
+        n_fields = len(self.bits)
+        out = np.empty((n_fields, keys.shape[0]), dtype=dtype)
+        if not n_fields:
+            return out
+        words = np.ascontiguousarray(keys.T)
+        masks = self._masks()
+        for w in range(self.n_words):
+            mine = np.flatnonzero(self.word == w)
+            if not mine.size:
+                continue
+            value = np.right_shift(words[w], self.shift[mine][:, None])
+            value &= masks[mine][:, None]
+            out[mine] = value
+        return out
+
     def key_deltas(self, arcs: Arcs) -> KeyArray:
         """Per transition, what adding its ``arcs`` (e.g. its effect) adds to each key
         word (mod ``2**64``)."""

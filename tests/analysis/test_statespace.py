@@ -574,3 +574,13 @@ def test_a_wide_net_explores_at_the_cost_of_what_it_enables() -> None:
     assert not space.fired_transitions[200:].any() and space.fired_transitions[:200].all()
     far = space.find(lambda m: (m[:, 50] == 1) & (m[:, 150] == 1))  # both rings halfway
     assert far is not None and len(space.trace_to(far)) == 100
+
+
+@settings(max_examples=30, deadline=None)
+@given(small_nets())
+def test_field_columns_read_from_keys_are_the_markings_field_values(net: Net) -> None:
+    """The frontier is unpacked from the stored keys (`Layout.fields`): the values must
+    be those `FieldNet.values` computes from the markings themselves."""
+    space = explore(net, max_states=2000)
+    got = space.layout.fields(space.keys, np.int64).T
+    assert np.array_equal(got, encoding.FieldNet.values(space.markings, space.layout))
