@@ -137,12 +137,15 @@ class QueryLimits:
         time_limit: seconds for the whole session (searches, graph, every formula).
         max_edges: edges of the reachability graph (CTL, LTL, Liveness).
         max_product_edges: reachable edges of one LTL product.
+        reductions: whether reachability and bounds formulas the full search leaves
+            undecided are tried on the structurally reduced net (`analysis.reduce`).
     """
 
     max_states: int | None = DEFAULT_MAX_STATES
     time_limit: float | None = None
     max_edges: int | None = DEFAULT_MAX_EDGES
     max_product_edges: int | None = DEFAULT_MAX_PRODUCT_EDGES
+    reductions: bool = True
 
 
 @dataclass(frozen=True)
@@ -538,7 +541,7 @@ class QuerySession:
         a witness replayed on this net; ``None`` when that does not decide either."""
         from analysis.reduce.query import reach_by_reduction
 
-        if self.out_of_time():
+        if self.out_of_time() or not self.limits.reductions:
             return None
         start = self.clock()
         found = reach_by_reduction(
@@ -654,7 +657,7 @@ class QuerySession:
         (`analysis.reduce`); ``None`` when that search does not complete either."""
         from analysis.reduce.query import bound_by_reduction
 
-        if self.out_of_time():
+        if self.out_of_time() or not self.limits.reductions:
             return None
         start = self.clock()
         places = [self.net.places[c].name for c in cols]

@@ -79,3 +79,12 @@ def test_a_query_cut_short_is_answered_on_the_reduced_net() -> None:
     for a in answers:
         if a.value is not None and expected[a.id] is not None:
             assert a.value == expected[a.id], a.id
+
+
+def test_the_reductions_switch_keeps_the_plain_answer() -> None:
+    model = _models()["HouseConstruction-PT-00002"]
+    net = _net(model)
+    props = [p for p, _ in _props(model, net)]
+    limits = QueryLimits(max_states=300, time_limit=60.0, reductions=False)
+    answers = QuerySession(net, limits).check(props)
+    assert all(a.techniques != REDUCED for a in answers)
