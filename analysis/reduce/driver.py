@@ -26,6 +26,7 @@ from analysis.reduce.dead import (
 from analysis.reduce.fusion import fuse_series_places
 from analysis.reduce.goal import Goal
 from analysis.reduce.implicit import remove_implicit_places
+from analysis.reduce.implicit_lp import remove_lp_implicit_places
 from analysis.reduce.work import WorkNet
 from coral_lang.net import Net
 
@@ -38,8 +39,13 @@ RULES: tuple[Rule, ...] = (
     remove_implicit_places,
     agglomerate_series,
     fuse_series_places,
+    remove_lp_implicit_places,
 )
 """The rule families in the order one round applies them (cheap removals first)."""
+
+LP_SECONDS = 0.05
+"""Seconds the linear-programming implicit-place rule may take in one reduction (less
+when the budget has less left): it must not cost what the reduction saves."""
 
 
 @dataclass(frozen=True)
@@ -101,6 +107,8 @@ def reduce_net(
         ident: dict[str, tuple[str, ...]] = {t.name: (t.name,) for t in net.transitions}
         return Reduction(net, net, goal, ident, {}, time.monotonic() - start)
     w = WorkNet(net, goal)
+    left = None if budget is None else budget.remaining()
+    w.lp_deadline = start + (LP_SECONDS if left is None else min(LP_SECONDS, left / 4))
     for _ in range(max_rounds):
         changed = False
         for rule in RULES:
