@@ -612,9 +612,12 @@ class _Checker:
             return None
         left = self.budget.remaining()
         test = self.net.final_test()
+        max_states = self.options.max_states
+        if self.cover.bounded is False:  # as for the full search: a small budget only
+            max_states = min(max_states or UNBOUNDED_STATES, UNBOUNDED_STATES)
         answer = decide_deadlock(
             self.net,
-            max_states=self.options.max_states,
+            max_states=max_states,
             budget=self.budget.child(seconds=None if left is None else left / 2),
             accepted=test.matches if self.net.finals else None,
         )
