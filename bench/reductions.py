@@ -28,7 +28,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from analysis.budget import Budget  # noqa: E402
-from analysis.reduce import decide_deadlock  # noqa: E402
+from analysis.reduce import Goal, decide_deadlock, reduce_net  # noqa: E402
 from coral_lang.pnml import parse_pnml  # noqa: E402
 
 SHARED = next(
@@ -144,6 +144,9 @@ def main() -> int:
     parser.add_argument(
         "--queries", action="store_true", help="reachability and bounds formulas instead"
     )
+    parser.add_argument(
+        "--lp", type=float, default=0.0, help="seconds for the LP implicit-place rule (0: off)"
+    )
     args = parser.parse_args()
     if args.queries:
         chosen = [m for m in _oracle() if m["states"] <= args.max_states]
@@ -166,7 +169,9 @@ def main() -> int:
             path = CONFORMANCE / "pnml" / f"{name}.pnml"
             net = parse_pnml(path.read_bytes(), path.name)
             start = time.perf_counter()
-            answer = decide_deadlock(net, budget=Budget(args.time_limit))
+            budget = Budget(args.time_limit)
+            reduction = reduce_net(net, Goal.deadlock(), budget=budget, lp_seconds=args.lp)
+            answer = decide_deadlock(net, budget=budget, reduction=reduction)
             seconds = time.perf_counter() - start
             red = answer.reduction.net
             if answer.deadlock is None:

@@ -24,7 +24,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from scipy.optimize import linprog
 
 from analysis.reduce.work import WorkNet
 
@@ -33,6 +32,8 @@ MAX_NEIGHBOURS = 40
 
 
 def _implicit(w: WorkNet, p: str) -> bool:
+    from scipy.optimize import linprog  # only when the rule is asked for
+
     touching = w.consumers[p] | w.producers[p]
     neighbours = sorted({q for t in touching for q in (*w.pre[t], *w.post[t])} - {p})
     if not neighbours or len(neighbours) > MAX_NEIGHBOURS:

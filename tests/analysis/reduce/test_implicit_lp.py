@@ -6,6 +6,7 @@ from __future__ import annotations
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from analysis.reduce.driver import reduce_net
 from analysis.reduce.goal import Goal
 from analysis.reduce.implicit_lp import remove_lp_implicit_places
 from analysis.reduce.work import WorkNet
@@ -75,3 +76,16 @@ def test_a_place_that_restricts_is_kept() -> None:
     transitions = (Transition("go", inputs=(("a", 1), ("gate", 1)), outputs=(("b", 1),)),)
     reduced, removed = _lp_reduced(Net(name="n", places=places, transitions=transitions))
     assert removed == 1 and {p.name for p in reduced.places} == {"gate", "b"}
+
+
+def test_the_driver_runs_the_lp_rule_only_when_asked() -> None:
+    places = (Place("a", initial=1), Place("b"), Place("c"), Place("sum", initial=1))
+    transitions = (
+        Transition("ab", inputs=(("a", 1), ("sum", 1)), outputs=(("b", 1), ("sum", 1))),
+        Transition("bc", inputs=(("b", 1), ("sum", 1)), outputs=(("c", 1),)),
+        Transition("ca", inputs=(("c", 1),), outputs=(("a", 1), ("sum", 1))),
+    )  # sum = a + b: no single place witnesses it, the one-witness rule cannot
+    net = Net(name="n", places=places, transitions=transitions)
+    goal = Goal.bounds(["a", "b", "c"])
+    assert "implicit-place-lp" not in reduce_net(net, goal).applied
+    assert reduce_net(net, goal, lp_seconds=1.0).applied.get("implicit-place-lp") == 1
