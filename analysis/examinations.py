@@ -92,6 +92,8 @@ GLOBAL_EXAMINATIONS = (
 EXAMINATIONS = QUERY_EXAMINATIONS + GLOBAL_EXAMINATIONS
 
 EXPLICIT = ("EXPLICIT", "STATE_COMPRESSION")
+REDUCED = ("STRUCTURAL_REDUCTION", *EXPLICIT)
+"""Techniques of an answer read on the structurally reduced net (`analysis.reduce`)."""
 
 STATE_EQUATION_SECONDS = 60.0
 """Most seconds the z3 proof of deadlock freedom may take when a search gave up."""
@@ -135,12 +137,15 @@ class QueryLimits:
         time_limit: seconds for the whole session (searches, graph, every formula).
         max_edges: edges of the reachability graph (CTL, LTL, Liveness).
         max_product_edges: reachable edges of one LTL product.
+        reductions: whether reachability and bounds formulas the full search leaves
+            undecided are tried on the structurally reduced net (`analysis.reduce`).
     """
 
     max_states: int | None = DEFAULT_MAX_STATES
     time_limit: float | None = None
     max_edges: int | None = DEFAULT_MAX_EDGES
     max_product_edges: int | None = DEFAULT_MAX_PRODUCT_EDGES
+    reductions: bool = True
 
 
 @dataclass(frozen=True)
@@ -516,12 +521,37 @@ class QuerySession:
             )
         if space.complete:
             return Answer(ident, r.negated, EXPLICIT, method="reachability")
+        reduced = self._reach_by_reduction(ident, r)
+        if reduced is not None:
+            return reduced
         return Answer(
             ident,
             None,
             method="reachability",
             reason=f"state space incomplete: {space.stopped_reason}",
         )
+
+    def _reduced_budget(self) -> budgets.Budget:
+        """Half of what is left: the reduced search must leave time to the others."""
+        left = self.remaining()
+        return self.budget.child(seconds=None if left is None else left / 2)
+
+    def _reach_by_reduction(self, ident: str, r: _Reach) -> Answer | None:
+        """The formula decided on the net reduced for what it observes (`analysis.reduce`),
+        a witness replayed on this net; ``None`` when that does not decide either."""
+        from analysis.reduce.query import reach_by_reduction
+
+        if self.out_of_time() or not self.limits.reductions:
+            return None
+        start = self.clock()
+        found = reach_by_reduction(
+            self.net, r.target, max_states=self.limits.max_states, budget=self._reduced_budget()
+        )
+        self.shared_seconds += self.clock() - start
+        if found is None:
+            return None
+        value = bool(found.value) != r.negated
+        return Answer(ident, value, REDUCED, method="reachability", trace=found.trace)
 
     def _ctl_formula(self, ident: str, q: Formula) -> Answer:
         graph = self.full_graph()
@@ -611,6 +641,9 @@ class QuerySession:
                 trace=trace,
                 reason="the bound reached equals the one a P-invariant proves",
             )
+        reduced = self._bound_by_reduction(ident, cols)
+        if reduced is not None:
+            return reduced
         return Answer(
             ident,
             None,
@@ -618,6 +651,23 @@ class QuerySession:
             reason=f"state space incomplete ({space.stopped_reason}); {found} tokens reached"
             + (f", at most {proven} by P-invariants" if proven is not None else ""),
         )
+
+    def _bound_by_reduction(self, ident: str, cols: list[int]) -> Answer | None:
+        """The bound from a complete search of the net reduced for these places
+        (`analysis.reduce`); ``None`` when that search does not complete either."""
+        from analysis.reduce.query import bound_by_reduction
+
+        if self.out_of_time() or not self.limits.reductions:
+            return None
+        start = self.clock()
+        places = [self.net.places[c].name for c in cols]
+        found = bound_by_reduction(
+            self.net, places, max_states=self.limits.max_states, budget=self._reduced_budget()
+        )
+        self.shared_seconds += self.clock() - start
+        if found is None:
+            return None
+        return Answer(ident, int(found.value), REDUCED, method="bound", trace=found.trace)
 
     def _invariant_bound(self, cols: Sequence[int]) -> int | None:
         """The least ``floor(y·M0 / min y(S))`` over the P-invariants ``y`` covering all

@@ -82,6 +82,7 @@ UNBOUNDED_STATES = 20_000
 REALISE_NODES = 20_000  # firing orders tried to turn a state-equation solution into a trace
 UNBOUNDED_SECONDS = 3.0
 EXPLICIT_POR = "explicit state space (stubborn-set reduced)"
+REDUCED = "structural reductions + explicit state space of the reduced net"
 TIMED = "timed analysis (zones)"
 UNTIMED_WITHIN = "decided by timed analysis: run coral-check verify --timed"
 NO_PROFILE = "no vehicle profile: timed analysis needs the mission's profile"
@@ -570,6 +571,9 @@ class _Checker:
                 f"all {self.space.states} reachable states explored; "
                 f"{ends} dead marking(s), all declared final",
             )
+        reduced = self._deadlock_by_reduction(title)
+        if reduced is not None:
+            return reduced
         from analysis import stateeq
 
         result, evidence = self._state_equation(stateeq.unexpected_deadlocks(net))
@@ -593,6 +597,65 @@ class _Checker:
             Verdict.INCONCLUSIVE,
             f"{self.method}; {result.method}",
             f"{self._incomplete()}; {result.explain()}",
+        )
+
+    def _deadlock_by_reduction(self, title: str) -> PropertyResult | None:
+        """When the full search stopped undecided: structural reductions (`analysis.reduce`)
+        and a search of the reduced net within half of what is left of the budget. The
+        declared finals' places are protected, so the reduced net's dead markings are
+        final exactly when the original's are; a witness is replayed on this net. None
+        when the net is not reducible or the reduced search does not decide either."""
+        from analysis.reduce import decide_deadlock
+        from analysis.reduce.driver import reducible
+
+        if not reducible(self.net) or self.budget.expired():
+            return None
+        left = self.budget.remaining()
+        test = self.net.final_test()
+        max_states = self.options.max_states
+        if self.cover.bounded is False:  # as for the full search: a small budget only
+            max_states = min(max_states or UNBOUNDED_STATES, UNBOUNDED_STATES)
+        answer = decide_deadlock(
+            self.net,
+            max_states=max_states,
+            budget=self.budget.child(seconds=None if left is None else left / 2),
+            accepted=test.matches if self.net.finals else None,
+        )
+        if answer.deadlock is None:
+            return None
+        size = answer.reduction.summary()
+        if not answer.deadlock:
+            return PropertyResult(
+                "deadlock",
+                title,
+                Verdict.PROVEN,
+                REDUCED,
+                f"all {answer.states} reachable states of the reduced net explored ({size}); "
+                + (
+                    "every dead marking is a declared final marking"
+                    if self.net.finals
+                    else "no dead marking"
+                ),
+            )
+        trace = answer.trace or []
+        index = {t.name: i for i, t in enumerate(self.net.transitions)}
+        sequence = [index[name] for name in trace]
+        marking = self.net.initial_marking()
+        for i in sequence:
+            marking = self.net.fire(marking, self.net.transitions[i])
+        return PropertyResult(
+            "deadlock",
+            title,
+            Verdict.VIOLATED,
+            REDUCED,
+            f"{'a non-final dead marking' if self.net.finals else 'a dead marking'}"
+            f" is reachable in {len(sequence)} step(s) (found on the reduced net: {size}; "
+            "trace mapped back and replayed on this net)",
+            Evidence(
+                trace=make_trace(self.net, sequence),
+                marking=self.net.marking_dict(marking),
+                note="found on the structurally reduced net; replayed on the original",
+            ),
         )
 
     def termination(self) -> list[PropertyResult]:

@@ -28,7 +28,11 @@ def agglomerate_series(w: WorkNet) -> bool:
     """Fuse transitions in series through a private place; True if any was fused."""
     changed = False
     for p in list(w.initial):
-        if p not in w.initial or w.initial[p] or p in w.protected_places:
+        if p not in w.initial or w.initial[p]:
+            continue
+        # For deadlock ``p`` may be observed: it is empty in every dead marking of the
+        # original, and the replayed witness reads it there (see `final_goal`).
+        if p in w.protected_places and w.goal.kind is not Kind.DEADLOCK:
             continue
         producers, consumers = w.producers.get(p, set()), w.consumers.get(p, set())
         if len(producers) != 1 or len(consumers) != 1:

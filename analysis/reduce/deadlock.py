@@ -8,7 +8,7 @@ on the net the user gave.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,7 +16,7 @@ import numpy.typing as npt
 
 from analysis.budget import Budget
 from analysis.reduce.driver import Reduction, reduce_net, reducible
-from analysis.reduce.goal import Goal
+from analysis.reduce.goal import Goal, Kind
 from analysis.statespace import explore
 from coral_lang.net import Net
 
@@ -100,12 +100,21 @@ def decide_deadlock(
     max_states: int | None = None,
     budget: Budget | None = None,
     reduction: Reduction | None = None,
+    accepted: Callable[[Sequence[int]], bool] | None = None,
 ) -> DeadlockAnswer:
     """Reduce ``net`` for the deadlock question, explore, and map the answer back.
 
     ``budget`` bounds the reduction and the search; a net with operator inputs is not
     reduced, and its dead states are found by `explore`'s own rule (terminal states).
+
+    ``accepted`` (a predicate on markings of ``net``) names dead markings that are no
+    deadlock, such as a mission's declared final markings: only a dead marking it
+    rejects is a witness. It reads the original marking the replay reaches, so the
+    caller must protect every place it reads (see `final_goal`): the rules then keep
+    those places' values at every dead marking.
     """
+    if accepted is not None:
+        return _decide_unaccepted(net, accepted, max_states, budget, reduction)
     red = reduction or reduce_net(net, Goal.deadlock(), budget=budget)
     early = reducible(net) and len(red.net.transitions) <= EARLY_STOP_TRANSITIONS
     first_dead = _FirstDead(red.net) if early else None
@@ -119,6 +128,49 @@ def decide_deadlock(
         if reached is None or not is_dead(net, reached):  # a rule is wrong: say so, decide nothing
             return DeadlockAnswer(None, None, red, space.states, WITNESS_FAILED)
         return DeadlockAnswer(True, trace, red, space.states)
+    if space.complete:
+        return DeadlockAnswer(False, None, red, space.states)
+    return DeadlockAnswer(None, None, red, space.states, space.stopped_reason)
+
+
+DEAD_REPLAYS = 10_000
+"""Dead markings of the reduced net replayed at most when looking for one that is not
+accepted (each replay costs the trace's length); past it the answer is undecided."""
+
+
+def final_goal(net: Net) -> Goal:
+    """The deadlock goal of a net whose declared final markings are no deadlock: a final
+    constrains every place it does not leave free (`Net.final_test`), so all those are
+    protected. The rules that drop a place whose value may differ between dead markings
+    (implicit and sink places) then keep them; the series rules still apply, since the
+    places they remove are empty in every dead marking of the original, so the replayed
+    witness has the original's dead marking exactly and the predicate reads it there."""
+    columns = net.final_test().columns if net.finals else ()
+    return Goal(Kind.DEADLOCK, frozenset(net.places[i].name for i in columns))
+
+
+def _decide_unaccepted(
+    net: Net,
+    accepted: Callable[[Sequence[int]], bool],
+    max_states: int | None,
+    budget: Budget | None,
+    reduction: Reduction | None,
+) -> DeadlockAnswer:
+    """`decide_deadlock` where some dead markings are accepted: the whole reduced space
+    is explored (the first dead marking may be an accepted one) and its dead markings
+    replayed on ``net`` in BFS order until one is not accepted."""
+    red = reduction or reduce_net(net, final_goal(net), budget=budget)
+    space = explore(red.net, max_states=max_states, budget=budget)
+    for replayed, state in enumerate(space.deadlocks):
+        if replayed >= DEAD_REPLAYS:
+            reason = f"more than {DEAD_REPLAYS} dead markings to replay"
+            return DeadlockAnswer(None, None, red, space.states, reason)
+        trace = red.expand_trace(space.trace_names(int(state)))
+        reached = replay(net, trace)
+        if reached is None or not is_dead(net, reached):
+            return DeadlockAnswer(None, None, red, space.states, WITNESS_FAILED)
+        if not accepted(reached):
+            return DeadlockAnswer(True, trace, red, space.states)
     if space.complete:
         return DeadlockAnswer(False, None, red, space.states)
     return DeadlockAnswer(None, None, red, space.states, space.stopped_reason)

@@ -26,6 +26,7 @@ from analysis.reduce.dead import (
 from analysis.reduce.fusion import fuse_series_places
 from analysis.reduce.goal import Goal
 from analysis.reduce.implicit import remove_implicit_places
+from analysis.reduce.implicit_lp import remove_lp_implicit_places
 from analysis.reduce.work import WorkNet
 from coral_lang.net import Net
 
@@ -40,6 +41,11 @@ RULES: tuple[Rule, ...] = (
     fuse_series_places,
 )
 """The rule families in the order one round applies them (cheap removals first)."""
+
+LP_RULES: tuple[Rule, ...] = (*RULES, remove_lp_implicit_places)
+"""With the linear-programming implicit-place rule last. Not the default: on the 47
+conformance instances it removed places on one only (HouseConstruction-PT-00002) while
+its LP calls doubled the time of the small reductions (bench/reductions.py, docs)."""
 
 
 @dataclass(frozen=True)
@@ -85,7 +91,12 @@ def _expired(budget: Budget | None) -> bool:
 
 
 def reduce_net(
-    net: Net, goal: Goal, *, budget: Budget | None = None, max_rounds: int = 100
+    net: Net,
+    goal: Goal,
+    *,
+    budget: Budget | None = None,
+    max_rounds: int = 100,
+    lp_seconds: float = 0.0,
 ) -> Reduction:
     """Reduce ``net`` preserving ``goal``.
 
@@ -95,15 +106,20 @@ def reduce_net(
         budget: once its deadline passes no further rule is started (the net reduced
             so far is returned: every rule is sound on its own).
         max_rounds: rounds of all rules at most.
+        lp_seconds: above 0, the linear-programming implicit-place rule runs too, for
+            at most this long in all (less when the budget has less left).
     """
     start = time.monotonic()
     if not reducible(net):
         ident: dict[str, tuple[str, ...]] = {t.name: (t.name,) for t in net.transitions}
         return Reduction(net, net, goal, ident, {}, time.monotonic() - start)
     w = WorkNet(net, goal)
+    left = None if budget is None else budget.remaining()
+    w.lp_deadline = start + (lp_seconds if left is None else min(lp_seconds, left / 4))
+    rules = LP_RULES if lp_seconds > 0 else RULES
     for _ in range(max_rounds):
         changed = False
-        for rule in RULES:
+        for rule in rules:
             if _expired(budget):
                 break
             changed = rule(w) or changed

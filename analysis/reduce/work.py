@@ -38,6 +38,10 @@ class WorkNet:
         if goal.kind is Kind.REACHABILITY:
             for name in goal.transitions:
                 self.protected_places.update(self.pre.get(name, {}))
+        self.lp_deadline: float | None = None
+        """`time.monotonic` past which the linear-programming rule tries no place."""
+        self.lp_tried: set[str] = set()
+        """Places the linear-programming rule has tried (each once per reduction)."""
         self.applied: defaultdict[str, int] = defaultdict(int)
         """How many times each rule fired, by rule name (for reports and the bench)."""
 
