@@ -34,9 +34,12 @@ residuals), and start with one weight per variable plus the incidence entries. A
 with more than this many is not attempted: the basis is empty and incomplete, with the
 reason "too large for the structural method (N places)"."""
 
-OUTPUT_CELLS = 100_000
-"""Most weights listed in all: each invariant lists one per variable, so a net of
-100,000 places with as many trivial invariants would otherwise list 10^10."""
+OUTPUT_CELLS = 2_000_000
+"""Most weights listed for the invariants found by elimination: each lists one per
+variable (16 MB of tuples at most)."""
+TRIVIAL_CELLS = 100_000
+"""The same for the unit invariants of places no transition touches: a net of 100,000
+such places would otherwise list 10^10 weights."""
 
 # A working row: (weights over the variables, residual over the columns, both as their
 # non-zero entries; support bitmask).
@@ -176,14 +179,17 @@ def sparse_semiflows(
             work = _eliminate(work, column, max_rows, budget, signs)
     except BudgetExceeded as stop:
         complete, reason = False, stop.reason
-    done = sorted([*trivial, *(sorted(r[0].items()) for r in work if not r[1])])
-    listed = max(1, OUTPUT_CELLS // max(1, n))
-    if len(done) > listed:
+    found = sorted(sorted(r[0].items()) for r in work if not r[1])
+    # the others first, then the untouched places' unit invariants (a smaller share)
+    done = found[: max(1, OUTPUT_CELLS // max(1, n))]
+    done += trivial[: max(1, TRIVIAL_CELLS // max(1, n))]
+    if len(done) < len(found) + len(trivial):
         complete = False
         reason = (reason + "; " if reason else "") + (
-            f"{len(done):,} invariants found, the first {listed:,} listed (each is {n:,} weights)"
+            f"{len(found) + len(trivial):,} invariants found, {len(done):,} listed (each is "
+            f"{n:,} weights)"
         )
-    vectors = sorted({_dense(dict(r), n) for r in done[:listed]})
+    vectors = sorted({_dense(dict(r), n) for r in done})
     return vectors, complete, reason
 
 
