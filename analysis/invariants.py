@@ -18,24 +18,32 @@ only rows that are already invariants (each still a genuine invariant).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
 from analysis.budget import Budget, BudgetExceeded, stage, work_limit_reason
-from analysis.structural import TooLargeForStructure, classify, incidence
+from analysis.structural import classify, incidence_columns, incidence_rows
 from coral_lang.net import Net
 
 DEFAULT_MAX_ROWS = 20_000
 DEFAULT_TIME_LIMIT = 20.0
 DEFAULT_MAX_CELLS = 20_000_000
-"""Size budget: the elimination's working rows are dense (one weight per variable, one
-residual per column), so it needs variables x (variables + columns) cells from the
-start. A net above this is not attempted: the basis is empty and incomplete, with the
+"""Size budget: the elimination's working rows are sparse (their non-zero weights and
+residuals), and start with one weight per variable plus the incidence entries. A net
+with more than this many is not attempted: the basis is empty and incomplete, with the
 reason "too large for the structural method (N places)"."""
 
-# A working row: (weights over the variables, residual over the columns, support bitmask).
-_Row = tuple[list[int], list[int], int]
+OUTPUT_CELLS = 2_000_000
+"""Most weights listed for the invariants found by elimination: each lists one per
+variable (16 MB of tuples at most)."""
+TRIVIAL_CELLS = 100_000
+"""The same for the unit invariants of places no transition touches: a net of 100,000
+such places would otherwise list 10^10 weights."""
+
+# A working row: (weights over the variables, residual over the columns, both as their
+# non-zero entries; support bitmask).
+_Row = tuple[dict[int, int], dict[int, int], int]
 
 
 @dataclass(frozen=True)
@@ -136,81 +144,170 @@ def semiflows(
         ``(vectors, complete, reason)``: the vectors are sorted; when ``complete`` is
         False they are only the rows that were already semiflows when the limit hit.
     """
+    sparse = [{j: int(v) for j, v in enumerate(row) if v} for row in rows]
+    return sparse_semiflows(sparse, max_rows, budget)
+
+
+def sparse_semiflows(
+    rows: Sequence[Mapping[int, int]],
+    max_rows: int = DEFAULT_MAX_ROWS,
+    budget: Budget | None = None,
+) -> tuple[list[tuple[int, ...]], bool, str]:
+    """`semiflows` of rows given by their non-zero entries (column -> value).
+
+    Working rows are sparse too (weights and residual as dicts), so the cost follows
+    the arcs and the rows' supports, never variables x columns: nets of thousands of
+    places and transitions are in reach within a time slice.
+    """
     n = len(rows)
-    m = len(rows[0]) if rows else 0
     budget = stage(budget, DEFAULT_TIME_LIMIT)
+    # A zero row (a place no transition touches) is an invariant alone and never
+    # combines with another: set aside, so that such places cost nothing.
     work: list[_Row] = [
-        ([1 if j == i else 0 for j in range(n)], [int(v) for v in rows[i]], 1 << i)
-        for i in range(n)
+        ({i: 1}, residual, 1 << i)
+        for i, row in enumerate(rows)
+        if (residual := {j: int(v) for j, v in row.items() if v})
     ]
-    pending = [c for c in range(m) if any(r[1][c] for r in work)]
+    trivial = [[(i, 1)] for i, row in enumerate(rows) if not any(row.values())]
+    signs = _Signs(work)
     complete, reason = True, ""
     try:
-        while pending:
-            column = min(pending, key=lambda c: _growth(work, c))
-            pending.remove(column)
-            work = _eliminate(work, column, max_rows, budget)
+        if len(work) > max_rows:
+            raise _too_many_rows(max_rows)
+        while signs.pending:
+            column = signs.cheapest()
+            work = _eliminate(work, column, max_rows, budget, signs)
     except BudgetExceeded as stop:
         complete, reason = False, stop.reason
-    done = [r for r in work if not any(r[1])]
-    vectors = sorted({tuple(r[0]) for r in done})
+    found = sorted(sorted(r[0].items()) for r in work if not r[1])
+    # the others first, then the untouched places' unit invariants (a smaller share)
+    done = found[: max(1, OUTPUT_CELLS // max(1, n))]
+    done += trivial[: max(1, TRIVIAL_CELLS // max(1, n))]
+    if len(done) < len(found) + len(trivial):
+        complete = False
+        reason = (reason + "; " if reason else "") + (
+            f"{len(found) + len(trivial):,} invariants found, {len(done):,} listed (each is "
+            f"{n:,} weights)"
+        )
+    vectors = sorted({_dense(dict(r), n) for r in done})
     return vectors, complete, reason
+
+
+def _dense(weights: dict[int, int], n: int) -> tuple[int, ...]:
+    out = [0] * n
+    for i, w in weights.items():
+        out[i] = w
+    return tuple(out)
+
+
+class _Signs:
+    """Per column, how many working rows are positive and negative there, kept up to
+    date as rows come and go: choosing the next column costs the pending columns, not
+    a pass over every row."""
+
+    def __init__(self, work: list[_Row]) -> None:
+        self.pos: dict[int, int] = {}
+        self.neg: dict[int, int] = {}
+        for row in work:
+            self.add(row, 1)
+        self.pending = set(self.pos) | set(self.neg)
+
+    def add(self, row: _Row, step: int) -> None:
+        for c, v in row[1].items():
+            counts = self.pos if v > 0 else self.neg
+            counts[c] = counts.get(c, 0) + step
+
+    def cheapest(self) -> int:
+        """The pending column whose elimination adds the fewest rows (the growth
+        heuristic: rows added minus rows removed), lowest index on ties."""
+
+        def growth(c: int) -> tuple[int, int]:
+            pos, neg = self.pos.get(c, 0), self.neg.get(c, 0)
+            return pos * neg - pos - neg, c
+
+        column = min(self.pending, key=growth)
+        self.pending.discard(column)
+        return column
 
 
 def _too_many_rows(max_rows: int) -> BudgetExceeded:
     return BudgetExceeded(work_limit_reason(max_rows, "intermediate row"))
 
 
-def _eliminate(work: list[_Row], column: int, max_rows: int, budget: Budget) -> list[_Row]:
+def _eliminate(
+    work: list[_Row], column: int, max_rows: int, budget: Budget, signs: _Signs
+) -> list[_Row]:
     """One Fourier-Motzkin step: cancel ``column`` with positive combinations; raises
     `BudgetExceeded` (the working set before this step is still valid) when the rows
-    would pass ``max_rows`` or the deadline passes."""
-    zero = [r for r in work if r[1][column] == 0]
-    positive = [r for r in work if r[1][column] > 0]
-    negative = [r for r in work if r[1][column] < 0]
+    would pass ``max_rows`` or the deadline passes.
+
+    The rows that do not touch ``column`` form an antichain of supports already, so
+    only the combined rows are checked against everything, and those rows only
+    against the combined rows kept (the same set as a full minimality pass)."""
+    budget.check()
+    zero = [r for r in work if column not in r[1]]
+    positive = [r for r in work if r[1].get(column, 0) > 0]
+    negative = [r for r in work if r[1].get(column, 0) < 0]
     if len(zero) + len(positive) * len(negative) > 8 * max_rows:
         raise _too_many_rows(max_rows)
-    combined = list(zero)
+    combined: list[_Row] = []
     for a in positive:
         budget.check()
         for b in negative:
             fa, fb = -b[1][column], a[1][column]
-            weights = [fa * x + fb * y for x, y in zip(a[0], b[0], strict=True)]
-            residual = [fa * x + fb * y for x, y in zip(a[1], b[1], strict=True)]
+            weights = _combine(a[0], b[0], fa, fb)
+            residual = _combine(a[1], b[1], fa, fb)
             combined.append(_normalised(weights, residual, a[2] | b[2]))
-    result = _minimal_supports(combined, budget)
+    fresh = _minimal_supports(combined, [r[2] for r in zero], budget)
+    masks = [r[2] for r in fresh]
+    kept = [r for r in zero if not any(k & ~r[2] == 0 for k in masks)] if fresh else zero
+    result = kept + fresh
     if len(result) > max_rows:
         raise _too_many_rows(max_rows)
+    for row in positive + negative:
+        signs.add(row, -1)
+    if len(kept) < len(zero):
+        dropped = {id(r) for r in zero} - {id(r) for r in kept}
+        for row in zero:
+            if id(row) in dropped:
+                signs.add(row, -1)
+    for row in fresh:
+        signs.add(row, 1)
     return result
 
 
-def _growth(work: list[_Row], column: int) -> int:
-    """Rows added minus rows removed if ``column`` is eliminated next (a heuristic)."""
-    pos = sum(1 for r in work if r[1][column] > 0)
-    neg = sum(1 for r in work if r[1][column] < 0)
-    return pos * neg - pos - neg
+def _combine(a: dict[int, int], b: dict[int, int], fa: int, fb: int) -> dict[int, int]:
+    """``fa * a + fb * b`` without its zero entries."""
+    out = {k: fa * v for k, v in a.items()}
+    for k, v in b.items():
+        total = out.get(k, 0) + fb * v
+        if total:
+            out[k] = total
+        else:
+            out.pop(k, None)
+    return out
 
 
-def _normalised(weights: list[int], residual: list[int], support: int) -> _Row:
+def _normalised(weights: dict[int, int], residual: dict[int, int], support: int) -> _Row:
     g = 0
-    for v in (*weights, *residual):
-        if v:
-            g = math.gcd(g, v)
+    for v in (*weights.values(), *residual.values()):
+        g = math.gcd(g, v)
     if g > 1:
-        weights = [v // g for v in weights]
-        residual = [v // g for v in residual]
+        weights = {k: v // g for k, v in weights.items()}
+        residual = {k: v // g for k, v in residual.items()}
     return weights, residual, support
 
 
-def _minimal_supports(rows: list[_Row], budget: Budget) -> list[_Row]:
-    """Keep rows whose support contains no other kept row's support.
+def _minimal_supports(rows: list[_Row], others: list[int], budget: Budget) -> list[_Row]:
+    """Keep rows whose support contains neither another kept row's support nor one
+    of ``others``.
 
     Two rows with equal support are proportional once all are minimal (the residual
     is linear in the weights), so keeping the first one loses nothing.
     """
-    ordered = sorted(rows, key=lambda r: (r[2].bit_count(), r[0]))
+    ordered = sorted(rows, key=lambda r: (r[2].bit_count(), sorted(r[0].items())))
     kept: list[_Row] = []
-    masks: list[int] = []
+    masks: list[int] = list(others)
     for count, row in enumerate(ordered):
         if count % 512 == 0:
             budget.check()
@@ -239,14 +336,10 @@ def p_invariants(
     Returns:
         An `InvariantBasis` of kind ``"P"``.
     """
-    n_p, n_t = len(net.places), len(net.transitions)
-    if n_p * (n_p + n_t) > max_cells:
-        return _basis("P", net.place_names, [], False, _too_large(n_p, "places"))
-    try:
-        rows = incidence(net).rows()
-    except TooLargeForStructure as exc:  # a max_cells above the matrix's own limit
-        return _basis("P", net.place_names, [], False, str(exc))
-    vectors, complete, reason = semiflows(rows, max_rows, budget)
+    rows = incidence_rows(net)
+    if len(rows) + sum(len(r) for r in rows) > max_cells:
+        return _basis("P", net.place_names, [], False, _too_large(len(rows), "places"))
+    vectors, complete, reason = sparse_semiflows(rows, max_rows, budget)
     return _basis("P", net.place_names, vectors, complete, reason)
 
 
@@ -268,15 +361,10 @@ def t_invariants(
         An `InvariantBasis` of kind ``"T"``.
     """
     names = tuple(t.name for t in net.transitions)
-    n_p, n_t = len(net.places), len(net.transitions)
-    if n_t * (n_t + n_p) > max_cells:
-        return _basis("T", names, [], False, _too_large(n_t, "transitions"))
-    try:
-        matrix = incidence(net).matrix
-    except TooLargeForStructure as exc:  # a max_cells above the matrix's own limit
-        return _basis("T", names, [], False, str(exc))
-    columns = [[int(v) for v in column] for column in matrix.T]
-    vectors, complete, reason = semiflows(columns, max_rows, budget)
+    columns = incidence_columns(net)
+    if len(columns) + sum(len(c) for c in columns) > max_cells:
+        return _basis("T", names, [], False, _too_large(len(columns), "transitions"))
+    vectors, complete, reason = sparse_semiflows(columns, max_rows, budget)
     return _basis("T", names, vectors, complete, reason)
 
 
@@ -407,5 +495,6 @@ __all__ = [
     "invariant_report",
     "p_invariants",
     "semiflows",
+    "sparse_semiflows",
     "t_invariants",
 ]

@@ -545,13 +545,24 @@ class _EnablingIndex:
             exact[g.transitions, :size] = g.exact
         never = np.zeros(n_t, dtype=bool)
         never[fnet.never] = True
-        score = np.where(exact, values[fields], -1)
+        # A component arc scores its number of values plus one; a count arc less than
+        # one, the less the more transitions produce into it (a rarely marked key lets
+        # fewer candidates through); padding -1.
+        count_arc = (fields < n_f) & ~exact
+        raised = fnet.inc_fields[fnet.inc_fields >= 0]
+        producers = np.bincount(raised, minlength=n_f + 1).astype(np.float64)
+        rarity = 0.5 / (1.0 + producers[fields])
+        score = np.where(exact, values[fields] + 1.0, np.where(count_arc, rarity, -1.0))
         key = score.argmax(axis=1) if width else np.zeros(n_t, dtype=np.int64)
-        has_key = (score.max(axis=1) >= 0) if width else np.zeros(n_t, dtype=bool)
-        has_key &= ~wide
+        best = score.max(axis=1) if width else np.full(n_t, -1.0)
+        has_key = (best >= 0) & ~wide
         if n_t < KEYED_MIN or np.count_nonzero(has_key) < KEYED_SHARE * n_t:
             has_key[:] = False  # the dense test is cheap, or most of the work anyway
-        keyed_t = np.flatnonzero(has_key & ~never)
+        keyed_t = np.flatnonzero(has_key & ~never & (best >= 1))
+        # count keys are coded as ``field * (top + 1) + low`` in int64 (see `_CountKeys`)
+        huge = low[np.arange(n_t), key] >= (1 << 62) // (n_f + 1) if width else has_key
+        counted_t = np.flatnonzero(has_key & ~never & (best < 1) & ~huge)
+        has_key[np.flatnonzero(has_key & (best < 1) & huge)] = False
         self.dense = np.flatnonzero(~has_key & ~never)
         self.groups = self._dense_groups(fnet, n_t)
         self.keyed = self._lists(
@@ -565,6 +576,16 @@ class _EnablingIndex:
             take = np.nonzero(rest)[1].reshape(n_t, self.rest_width)
         rows = np.arange(n_t)[:, None]
         self.rest_fields = np.ascontiguousarray(fields[rows, take].T)
+        bare = (self.rest_fields == n_f).all(axis=0)  # no arc but the key
+        self.count_keys = [
+            _CountKeys(t, fields[t, key[t]], low[t, key[t]], tested)
+            for tested, t in (
+                (False, counted_t[bare[counted_t]]),
+                (True, counted_t[~bare[counted_t]]),
+            )
+            if t.size
+        ]
+        self.looked_up = bool(self.keyed) or bool(self.count_keys)
         self.rest_low = np.ascontiguousarray(low[rows, take].T)
         self.rest_exact = np.ascontiguousarray(exact[rows, take].T)
 
@@ -616,6 +637,52 @@ class _EnablingIndex:
         return np.concatenate(trans), np.concatenate(src)
 
 
+class _CountKeys:
+    """Transitions looked up by a count input (their *key*): enabled only where that
+    field holds at least ``low`` tokens. Sorted by ``(field, low)`` as codes
+    ``field * (top + 1) + low``, the transitions a field holding ``v`` tokens lets
+    through (``low <= v``) are a run of the sorted list, found for every marked
+    (field, column) pair of a block by one `np.searchsorted`: a marking costs one
+    comparison per key field plus what it marks, not the transitions of the net.
+
+    ``tested`` says whether the transitions have other input arcs to test (`edges_of`
+    skips the test for lists whose transitions have none)."""
+
+    def __init__(
+        self,
+        trans: npt.NDArray[np.int64],
+        field: npt.NDArray[np.int64],
+        low: npt.NDArray[np.int64],
+        tested: bool,
+    ) -> None:
+        self.tested = tested
+        self.top = int(low.max(initial=1))
+        codes = field * (self.top + 1) + low
+        order = np.lexsort((trans, codes))
+        self.codes = codes[order]
+        self.trans = trans[order]
+        self.fields, self.first = np.unique(field[order], return_index=True)
+        self.least = low[order][self.first]  # each field's first run is its lowest
+
+    def candidates(self, cols: npt.NDArray[np.integer]) -> Edges:
+        """The (transition, column) pairs whose key holds enough tokens."""
+        n = cols.shape[1]
+        values = cols.take(self.fields, axis=0)
+        # a filter only (the runs below are exact): clipped to what the dtype holds
+        least = np.minimum(self.least, np.iinfo(values.dtype).max).astype(values.dtype)
+        flat = np.flatnonzero(values >= least[:, None])
+        row = flat // n
+        col = flat - row * n
+        value = np.minimum(values.reshape(-1).take(flat).astype(np.int64), self.top)
+        first = self.first.take(row)
+        code = self.fields.take(row) * (self.top + 1) + value
+        count = np.searchsorted(self.codes, code, side="right") - first
+        total = int(count.sum())
+        offsets = np.cumsum(count) - count - first
+        trans = self.trans.take(np.arange(total) - np.repeat(offsets, count))
+        return trans, np.repeat(col, count)
+
+
 class _Explorer:
     """The mutable state of one exploration; `explore` is its only user.
 
@@ -650,7 +717,7 @@ class _Explorer:
         self.fnet = fnet = FieldNet(cn, layout)
         self.index = _EnablingIndex(fnet, layout, cn.n_transitions)
         # transitions tested in every marking of a narrow level (the others by lookup)
-        self.tested = max(1, self.index.dense.size) if self.index.keyed else cn.n_transitions
+        self.tested = max(1, self.index.dense.size) if self.index.looked_up else cn.n_transitions
         inc_t, inc_col = np.nonzero(fnet.inc_fields >= 0)
         self.inc_t = inc_t.astype(np.int64)
         self.inc_f = fnet.inc_fields[inc_t, inc_col]
@@ -780,23 +847,39 @@ class _Explorer:
             matrix = _group_matrix(cols, index.groups, self.dense_tests, index.dense.size)
             rows, src = _nonzero(matrix)
             parts.append((index.dense.take(rows), src))
-        if not index.keyed:
+        if not index.looked_up:
             return parts[0] if parts else (np.zeros(0, np.int64), np.zeros(0, np.int64))
-        n = cols.shape[1]
-        trans, src = index.candidates(cols)
-        if index.rest_width:
-            flat = np.concatenate([cols, np.zeros((1, n), dtype=self.dtype)]).reshape(-1)
-            ok: npt.NDArray[np.bool_] | None = None
-            for k in range(index.rest_width):
-                values = flat.take(index.rest_fields[k].take(trans) * n + src)
-                values -= self.rest_low[k].take(trans)
-                passed = values.view(_unsigned(self.dtype)) <= self.rest_span[k].take(trans)
-                ok = passed if ok is None else ok & passed
-            assert ok is not None
-            keep = np.flatnonzero(ok)
-            trans, src = trans.take(keep), src.take(keep)
-        parts.append((trans, src))
+        found = [(index.candidates(cols), True)] if index.keyed else []
+        found += [(keys.candidates(cols), keys.tested) for keys in index.count_keys]
+        flat: npt.NDArray[np.integer] | None = None
+        for (trans, src), tested in found:
+            if tested and index.rest_width:
+                if flat is None:
+                    zero = np.zeros((1, cols.shape[1]), dtype=self.dtype)
+                    flat = np.concatenate([cols, zero]).reshape(-1)
+                trans, src = self.rest_passed(flat, cols.shape[1], trans, src)
+            parts.append((trans, src))
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+    def rest_passed(
+        self,
+        flat: npt.NDArray[np.integer],
+        n: int,
+        trans: npt.NDArray[np.int64],
+        src: npt.NDArray[np.int64],
+    ) -> Edges:
+        """The candidates (``trans``, ``src``) whose other input arcs pass, in a block
+        of ``n`` columns given flat with an extra row of zeros (``flat``)."""
+        index = self.index
+        ok: npt.NDArray[np.bool_] | None = None
+        for k in range(index.rest_width):
+            values = flat.take(index.rest_fields[k].take(trans) * n + src)
+            values -= self.rest_low[k].take(trans)
+            passed = values.view(_unsigned(self.dtype)) <= self.rest_span[k].take(trans)
+            ok = passed if ok is None else ok & passed
+        assert ok is not None
+        keep = np.flatnonzero(ok)
+        return trans.take(keep), src.take(keep)
 
     def overflow(
         self,
@@ -1026,7 +1109,7 @@ class _Explorer:
         if self.sleep_next:
             # (source, transition) order: stable radix sorts on 16 bits, by transition
             # (unless the edges come transition-major already), then by source.
-            if self.index.keyed:
+            if self.index.looked_up:
                 order = np.argsort(_small(trans, self.cn.n_transitions), kind="stable")
                 trans, src = trans.take(order), src.take(order)
             order = np.argsort(_small(src, width), kind="stable")
@@ -1191,7 +1274,7 @@ class _Explorer:
         and the densely tested transitions are looked at: a marking of a net with
         thousands of transitions in components costs what it enables, not the width of
         the net (`enabled_few` tests every transition in every marking)."""
-        if not self.index.keyed:
+        if not self.index.looked_up:
             enabled = self.enabled_few(cols)
             return _nonzero(enabled), enabled.size
         edges = self.edges_of(cols)
@@ -1214,7 +1297,7 @@ class _Explorer:
                 # too wide to expand in one go, or (lookups make levels cheap) so wide
                 # that unchecked duplicates pile up: the next frontier
                 wide = width * self.tested > CELLS_PER_STEP
-                if spec.keys and (wide or (self.index.keyed and width > NARROW_WIDTH)):
+                if spec.keys and (wide or (self.index.looked_up and width > NARROW_WIDTH)):
                     break
                 self.guard(width * self.tested)  # the deadline, between levels too
                 every, cells = self.narrow_edges(current)
@@ -1292,7 +1375,8 @@ class _Explorer:
         enabled matrix (bounded temporaries, warmer caches)."""
         per_state = self.edges / max(1, self.store.size)
         by_edges = int(EDGES_PER_STEP / max(per_state, 1.0))
-        by_matrix = CELLS_PER_STEP // max(1, self.cn.n_transitions)
+        tested = self.tested if self.reducer is None else self.cn.n_transitions
+        by_matrix = CELLS_PER_STEP // max(1, tested)  # lookups build no (T, n) matrix
         size = max(min(256, self.chunk), min(self.chunk, by_edges, by_matrix))
         if self.reducer is not None and self.choice_markings < POR_SAMPLE:
             # Small steps until the reduction is judged, so it is judged on the sample.

@@ -115,6 +115,22 @@ def incidence(net: Net, max_cells: int = MAX_DENSE_CELLS) -> Incidence:
     )
 
 
+def incidence_columns(net: Net) -> list[dict[int, int]]:
+    """Column ``t`` of the incidence matrix C as place index -> non-zero change: built
+    from the arcs, so its size follows them, never places x transitions."""
+    return _effects(net)
+
+
+def incidence_rows(net: Net) -> list[dict[int, int]]:
+    """Row ``p`` of the incidence matrix C as transition index -> non-zero change
+    (the transpose of `incidence_columns`)."""
+    rows: list[dict[int, int]] = [{} for _ in net.places]
+    for t, column in enumerate(_effects(net)):
+        for p, change in column.items():
+            rows[p][t] = change
+    return rows
+
+
 # -- classification ---------------------------------------------------------------------
 
 
@@ -409,5 +425,7 @@ __all__ = [
     "TooLargeForStructure",
     "classify",
     "incidence",
+    "incidence_columns",
+    "incidence_rows",
     "structural_boundedness",
 ]

@@ -9,6 +9,9 @@ The nets (`tests/analysis/wide_nets.py`, taken from this tree for both sides) ar
 rings of one token each, with extra transitions that never fire or with parallel
 copies of each step: what matters is that enabling costs what a marking enables, not
 the width of the net. ``rings(3, 100)`` (300 transitions) is the narrow reference.
+``count_rings`` put two or three tokens on each ring, so its places are counts, not
+one-hot components: the same test for nets of counts, whose narrow reference is
+``count_rings(2, 40, 2)`` (80 transitions; the same states as the wide one built on it).
 """
 
 from __future__ import annotations
@@ -25,13 +28,17 @@ NETS = [
     "rings(2, 500, idle=4000)",  # 5,000 transitions, 2.5e5 states
     "parallel_rings(2, 300, 10)",  # 6,000 transitions, 9e4 states, 20 enabled each
     "rings(2, 700, idle=18000)",  # 19,400 transitions, 4.9e5 states
+    "count_rings(2, 40, 2)",  # narrow reference of counts: 80 transitions, 6.7e5 states
+    "count_rings(2, 40, 2, idle=4000)",  # the same states, 4,080 transitions
+    "count_rings(1, 80, 3, idle=18000)",  # 18,080 transitions, 8.9e4 states, 3 tokens
 ]
 CHILD = """
 import sys, time
 sys.path.insert(0, sys.argv[2])
-from wide_nets import parallel_rings, rings
+from wide_nets import count_rings, parallel_rings, rings
 from analysis.statespace import explore
-net = eval(sys.argv[1], {"rings": rings, "parallel_rings": parallel_rings})
+names = {"rings": rings, "parallel_rings": parallel_rings, "count_rings": count_rings}
+net = eval(sys.argv[1], names)
 start = time.perf_counter()
 space = explore(net, max_states=10**7)
 print(len(net.transitions), space.states, space.edges, time.perf_counter() - start)

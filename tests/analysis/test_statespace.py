@@ -584,3 +584,40 @@ def test_field_columns_read_from_keys_are_the_markings_field_values(net: Net) ->
     space = explore(net, max_states=2000)
     got = space.layout.fields(space.keys, np.int64).T
     assert np.array_equal(got, encoding.FieldNet.values(space.markings, space.layout))
+
+
+@pytest.mark.slow
+@settings(max_examples=150)
+@given(small_nets(max_weight=3, max_initial=3))
+def test_looking_transitions_up_by_a_key_agrees_with_the_reference(net: Net) -> None:
+    """Every transition with at most two input fields looked up by a key (a component
+    value or a count), as on wide nets, even on these small ones: the same answers."""
+    ref = explore_reference(net, max_states=BUDGET)
+    with (
+        mock.patch.object(statespace, "KEYED_MIN", 0),
+        mock.patch.object(statespace, "KEYED_SHARE", 0.0),
+    ):
+        space = explore(net, max_states=BUDGET)
+    if not ref.complete:
+        assert not space.complete and space.states == BUDGET
+        return
+    assert space.complete
+    _agree(space, ref, net)
+
+
+def test_a_wide_net_of_counts_explores_at_the_cost_of_what_it_marks() -> None:
+    """4,160 transitions on count places (two tokens per ring, no components): the
+    enabled ones are looked up from the marked places, with exact counts and traces."""
+    from tests.analysis.wide_nets import count_rings
+
+    net = count_rings(2, 40, 2, idle=4_080)
+    ways = 40 * 41 // 2  # two tokens on 40 places
+    space = explore(net)
+    assert space.complete and space.states == ways**2
+    assert not space.deadlocks.size and space.max_tokens_place == 2
+    assert not space.fired_transitions[80:].any() and space.fired_transitions[:80].all()
+    # each ring's marking enables one transition per marked place
+    per_ring = 2 * (ways - 40) + 40  # two marked places, or one place with both tokens
+    assert space.edges == 2 * per_ring * ways
+    far = space.find(lambda m: (m[:, 39] == 2) & (m[:, 79] == 2))  # both rings' last place
+    assert far is not None and len(space.trace_to(far)) == 4 * 39

@@ -71,3 +71,38 @@ def parallel_rings(n_rings: int, length: int, copies: int) -> Net:
         places=tuple(places),
         transitions=tuple(transitions),
     )
+
+
+def count_rings(n_rings: int, length: int, tokens: int, idle: int = 0) -> Net:
+    """`rings` with ``tokens`` tokens starting in the first place of each ring: the
+    places are counts, not one-hot components, so enabling cannot be looked up by a
+    component's value. ``idle`` transitions each take from a ring place and from an
+    empty place, so they never fire.
+
+    Reachable markings: ``C(length + tokens - 1, tokens) ** n_rings`` (the ways to put
+    ``tokens`` tokens on ``length`` places, per ring); a marking enables one transition
+    per marked ring place and none is dead.
+    """
+    places: list[Place] = []
+    transitions: list[Transition] = []
+    for r in range(n_rings):
+        places += [Place(f"r{r}p{k}", tokens if k == 0 else 0) for k in range(length)]
+        transitions += [
+            Transition(f"r{r}t{k}", ((f"r{r}p{k}", 1),), ((f"r{r}p{(k + 1) % length}", 1),))
+            for k in range(length)
+        ]
+    if idle:
+        places.append(Place("empty"))
+    transitions += [
+        Transition(
+            f"idle{k}",
+            ((f"r{k % n_rings}p{(k // n_rings) % length}", 1), ("empty", 1)),
+            ((f"r{k % n_rings}p{(k // n_rings + 1) % length}", 1),),
+        )
+        for k in range(idle)
+    ]
+    return Net(
+        name=f"countrings{n_rings}x{length}x{tokens}",
+        places=tuple(places),
+        transitions=tuple(transitions),
+    )
