@@ -145,3 +145,20 @@ def test_state_equation_still_proves_when_there_is_time() -> None:
     session = QuerySession(rings(3, 4), QueryLimits(time_limit=60.0))
     proof = session._deadlock_free_by_state_equation()
     assert proof is not None and proof.value is False
+
+
+def test_ltl_and_ctl_stop_at_the_memory_limit_with_its_reason() -> None:
+    from analysis.budget import BudgetExceeded
+    from analysis.ctl import CtlChecker
+    from analysis.ltl import check_ltl
+    from analysis.stategraph import build_graph
+    from analysis.statespace import explore
+
+    graph = build_graph(explore(mutex()))
+    body = Finally(at_least("cs1", 1))
+    with pytest.raises(BudgetExceeded, match="memory limit of 1 B reached"):
+        check_ltl(graph, All(Globally(body)), budget=Budget(memory=1))
+    with pytest.raises(BudgetExceeded, match="labelling stopped: memory limit of 1 B"):
+        CtlChecker(graph, budget=Budget(memory=1)).holds(All(body))
+    # With room, the same check answers (AG AF cs1 fails: process 2 may keep the lock).
+    assert check_ltl(graph, All(Globally(body)), budget=Budget(memory=1 << 40)).holds is False
