@@ -322,7 +322,9 @@ def structural_boundedness(
     effects = _effects(net)
     names = net.place_names
     m0 = net.initial_marking()
-    y = [z3.Real(f"y_{i}") for i in range(len(names))]
+    unit = _unit_weighting(effects)
+    # One z3 variable a place: only when an LP will be built (about 40 us each).
+    y = [z3.Real(f"y_{i}") for i in range(len(names))] if per_place or not unit else []
     reasons: list[str] = []
 
     def column_constraints() -> list[z3.BoolRef]:
@@ -337,7 +339,7 @@ def structural_boundedness(
 
     weights: dict[str, Fraction] | None = None
     decided: bool | None
-    if _unit_weighting(effects):
+    if unit:
         # y = 1 everywhere already satisfies y^T C <= 0: no transition makes tokens.
         weights = dict.fromkeys(names, Fraction(1))
         decided = True
