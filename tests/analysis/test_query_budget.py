@@ -91,11 +91,11 @@ def test_a_failed_allocation_is_cannot_compute_for_the_formulas_left(
         raise MemoryError
 
     monkeypatch.setattr(examinations, "explore", failing)
-    session = QuerySession(mutex(), QueryLimits(memory_limit=200 << 20))
+    session = QuerySession(mutex(), QueryLimits(memory_limit=64 << 30))
     answers = session.check(_formulas())
     assert [a.computed for a in answers] == [False, False, False, False, True]
     for answer in answers[:4]:
-        assert "memory limit of 200 MiB reached" in (answer.reason or ""), answer.id
+        assert "memory limit of 64 GiB reached" in (answer.reason or ""), answer.id
     assert session.check_global("Liveness").value is None
     assert len(calls) == 1  # spent after the first failure: nothing retried
 
@@ -114,11 +114,11 @@ def test_memory_error_in_the_cli_is_exit_3_with_a_line_per_formula(
         raise MemoryError
 
     monkeypatch.setattr(QuerySession, "table", failing)
-    code = main(["query", str(model), str(queries), "--format", "json", "--memory-limit", "1G"])
+    code = main(["query", str(model), str(queries), "--format", "json", "--memory-limit", "64G"])
     document = json.loads(capsys.readouterr().out)
     assert code == 3
     assert document["cannot_compute"] == len(document["results"]) > 0
-    assert all("memory limit of 1 GiB" in r["reason"] for r in document["results"])
+    assert all("memory limit of 64 GiB" in r["reason"] for r in document["results"])
 
 
 def test_state_equation_building_stops_at_the_deadline() -> None:
