@@ -290,14 +290,7 @@ def coverability(
     tree = _Tree(net)
     complete, reason = tree.build(max_nodes, budget)
     n_places = len(net.places)
-    first_omega: dict[int, int] = {}
-    top = [0] * n_places
-    for index, node in enumerate(tree.nodes):
-        for p, v in enumerate(node.marking):
-            if v == OMEGA:
-                first_omega.setdefault(p, index)
-            else:
-                top[p] = max(top[p], v)
+    first_omega, top = _summarise(tree.nodes, n_places)
     unbounded = tuple(net.places[p].name for p in sorted(first_omega))
     pumps: dict[str, PumpingTrace] = {}
     if find_pumps:
@@ -317,6 +310,29 @@ def coverability(
         bounds=bounds,
         nodes=len(tree.nodes),
     )
+
+
+SUMMARY_BLOCK = 512
+"""Tree nodes read into one array by `_summarise` (a few MB on wide nets)."""
+
+
+def _summarise(nodes: Sequence[_Node], n_places: int) -> tuple[dict[int, int], list[int]]:
+    """Per place, the first node where it is omega and the largest finite count: block
+    by block in numpy (a Python loop over nodes x places took 10 s of a 10 s budget on
+    a 2,001-place net of 14,582 nodes)."""
+    first_omega: dict[int, int] = {}
+    top = np.zeros(n_places, dtype=np.int64)
+    for start in range(0, len(nodes), SUMMARY_BLOCK):
+        block = np.array(
+            [node.marking for node in nodes[start : start + SUMMARY_BLOCK]], dtype=np.int64
+        ).reshape(-1, n_places)
+        omega = block == OMEGA
+        top = np.maximum(top, np.where(omega, 0, block).max(axis=0, initial=0))
+        seen = omega.any(axis=0)
+        for p in np.flatnonzero(seen).tolist():
+            if p not in first_omega:
+                first_omega[p] = start + int(np.argmax(omega[:, p]))
+    return first_omega, [int(v) for v in top]
 
 
 # -- pumping traces ---------------------------------------------------------------------

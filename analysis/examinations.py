@@ -43,7 +43,7 @@ import numpy as np
 import numpy.typing as npt
 
 from analysis import budget as budgets
-from analysis.budget import BudgetExceeded, Clock
+from analysis.budget import BudgetExceeded, Clock, memory_limit_reason
 from analysis.ctl import CtlChecker, CtlError, NetIndex, StateEvaluator, marking_table
 from analysis.mccxml import MccProperty, PlaceBound
 from analysis.stategraph import GraphError, StateGraph, build_graph, scc_labels
@@ -101,8 +101,10 @@ STATE_EQUATION_SECONDS = 60.0
 INVARIANT_SECONDS = 10.0
 """Most seconds the P-invariants behind OneSafe and UpperBounds may take."""
 
-STATE_EQUATION_CELLS = 25_000_000
-"""Largest places x transitions the state equation takes (it builds dense matrices)."""
+STATE_EQUATION_SECONDS_PER_ARC = 2e-4
+"""What building the state equation costs per arc, with a margin (z3's Python API:
+about 100 us an arc measured on generated rings of 4,000-20,000 arcs): the proof is
+not tried when this times the arcs exceeds the time left."""
 """Technique words (the MCC's) of answers read off the explicit state space."""
 
 DEFAULT_MAX_STATES = 5_000_000
@@ -139,6 +141,8 @@ class QueryLimits:
         max_product_edges: reachable edges of one LTL product.
         reductions: whether reachability and bounds formulas the full search leaves
             undecided are tried on the structurally reduced net (`analysis.reduce`).
+        memory_limit: bytes of resident memory the process may use (checked by every
+            search, the graph, the LTL product and CTL labelling through the budget).
     """
 
     max_states: int | None = DEFAULT_MAX_STATES
@@ -146,6 +150,7 @@ class QueryLimits:
     max_edges: int | None = DEFAULT_MAX_EDGES
     max_product_edges: int | None = DEFAULT_MAX_PRODUCT_EDGES
     reductions: bool = True
+    memory_limit: int | None = None
 
 
 @dataclass(frozen=True)
@@ -271,7 +276,12 @@ class QuerySession:
 
     def __post_init__(self) -> None:
         self.index = NetIndex(self.net)
-        self.budget = budgets.Budget(self.limits.time_limit, clock=self.clock)
+        self.budget = budgets.Budget(
+            self.limits.time_limit, clock=self.clock, memory=self.limits.memory_limit
+        )
+        # Set when an allocation failed (MemoryError): every later formula is then
+        # "not computed" with this reason instead of trying (and failing) again.
+        self._failed: str | None = None
         self._table: npt.NDArray[np.integer] | None = None
         self._ctl: CtlChecker | None = None
         self._reduced: StateSpace | None = None
@@ -284,8 +294,25 @@ class QuerySession:
         return self.budget.remaining()
 
     def out_of_time(self) -> bool:
-        left = self.remaining()
-        return left is not None and left <= 0
+        """Whether the session's budget is spent: its deadline passed, the process is
+        over the memory limit, or an allocation already failed."""
+        return self._failed is not None or self.budget.expired()
+
+    def spent_reason(self) -> str:
+        """Why the budget is spent (`out_of_time`), in `analysis.budget`'s words."""
+        return self._failed or self.budget.time_reason()
+
+    def not_computed(self, ident: str, method: str = "") -> Answer:
+        """The answer to a formula the session's budget did not reach."""
+        return Answer(ident, None, method=method, reason=f"not computed: {self.spent_reason()}")
+
+    def _out_of_memory(self) -> str:
+        """Record a failed allocation (the session is spent from now on); its reason."""
+        done = None if self.space is None else self.space.states
+        self._table = None
+        self._ctl = None
+        self._failed = memory_limit_reason(self.limits.memory_limit, done)
+        return self._failed
 
     def full_space(self) -> StateSpace:
         """The (unreduced) state space, explored once within the budgets; it may be
@@ -364,15 +391,15 @@ class QuerySession:
             k not in reach and k not in answers and not _initial_only(p.query)
             for k, p in enumerate(props)
         )
-        if reach and not needs_space and self.space is None:
-            self._search(props, reach, answers)
+        if reach and not needs_space and self.space is None and not self.out_of_time():
+            self._shared(lambda: self._search(props, reach, answers))
         scanned = [
             k
             for k, p in enumerate(props)
             if k not in answers and (k in reach or isinstance(p.query, PlaceBound))
         ]
         if len(scanned) > 1 and not self.out_of_time():
-            self._batch(props, scanned, reach, answers)
+            self._shared(lambda: self._batch(props, scanned, reach, answers))
         for k, prop in enumerate(props):
             if k in answers:
                 continue
@@ -381,9 +408,23 @@ class QuerySession:
                 answer = self._answer(prop, reach.get(k))
             except (CtlError, ValueError) as exc:
                 answer = Answer(prop.id, None, reason=f"cannot check: {exc}", method="error")
+            except BudgetExceeded as exc:
+                answer = Answer(prop.id, None, reason=exc.reason)
+            except MemoryError:
+                answer = Answer(prop.id, None, reason=self._out_of_memory())
             elapsed = self.clock() - start
             answers[k] = _with(answer, seconds=elapsed, examination=examination_of(prop))
         return [answers[k] for k in range(len(props))]
+
+    def _shared(self, work: Callable[[], None]) -> None:
+        """Run work shared by several formulas; a budget or allocation failure in it
+        leaves their answers to the per-formula pass, which then reports the reason."""
+        try:
+            work()
+        except BudgetExceeded:
+            pass  # the budget is spent: `out_of_time` says so to every later formula
+        except MemoryError:
+            self._out_of_memory()
 
     def _unknown_names(self, q: Formula | PlaceBound) -> str | None:
         """The first place or transition ``q`` names that the net lacks, described."""
@@ -401,10 +442,10 @@ class QuerySession:
         q = prop.query
         if isinstance(q, PlaceBound):
             return self._bound(prop.id, q)
-        if self.out_of_time():
-            return Answer(prop.id, None, reason=self.budget.time_reason())
         if _initial_only(q):
-            return self._initial(prop.id, q)
+            return self._initial(prop.id, q)  # needs no search: answered at any budget
+        if self.out_of_time():
+            return self.not_computed(prop.id)
         if reach is not None:
             self._scan({0: reach}, {})
             return self._reach_answer(prop.id, reach, self.full_space())
@@ -610,7 +651,7 @@ class QuerySession:
         except LtlError as exc:
             return Answer(ident, None, method="ltl", reason=f"cannot check: {exc}")
         if self.out_of_time():
-            return Answer(ident, None, method="ltl", reason=self.budget.time_reason())
+            return self.not_computed(ident, "ltl")
         if result.holds:
             return Answer(ident, True, EXPLICIT, method="ltl")
         prefix = tuple(self.net.transitions[t].name for _, t, _ in result.prefix if t >= 0)
@@ -621,7 +662,7 @@ class QuerySession:
 
     def _bound(self, ident: str, q: PlaceBound) -> Answer:
         if self.out_of_time() and self.space is None:
-            return Answer(ident, None, method="bound", reason=self.budget.time_reason())
+            return self.not_computed(ident, "bound")
         cols = [self.index.place[p] for p in q.places]
         best, found = self._scan({}, {0: cols})[0]
         return self._bound_answer(ident, cols, best, found)
@@ -707,7 +748,15 @@ class QuerySession:
             "OneSafe": self._one_safe,
             "StableMarking": self._stable_marking,
         }
-        answer = run[examination]()
+        if self.out_of_time() and self.space is None:
+            answer = self.not_computed("", "global")
+        else:
+            try:
+                answer = run[examination]()
+            except BudgetExceeded as exc:
+                answer = Answer("", None, method="global", reason=exc.reason)
+            except MemoryError:
+                answer = Answer("", None, method="global", reason=self._out_of_memory())
         return _with(answer, id=examination, seconds=self.clock() - start, examination=examination)
 
     def _incomplete(self, space: StateSpace) -> Answer:
@@ -768,12 +817,13 @@ class QuerySession:
     def _deadlock_free_by_state_equation(self) -> Answer | None:
         """FALSE when the state equation with trap constraints proves that no dead
         marking is reachable; ``None`` when it cannot (a solution of the equation is
-        not a deadlock, so it never gives TRUE), the net is too large for its dense
-        matrices, or no time is left."""
-        n_places, n_transitions = len(self.net.places), len(self.net.transitions)
-        if n_places * n_transitions > STATE_EQUATION_CELLS:
-            return None
-        if self.out_of_time():
+        not a deadlock, so it never gives TRUE), or the time left would not build its
+        constraints (`STATE_EQUATION_SECONDS_PER_ARC`; building checks the budget too)."""
+        arcs = sum(len(t.inputs) + len(t.outputs) for t in self.net.transitions)
+        left = self.remaining()
+        if self.out_of_time() or (
+            left is not None and arcs * STATE_EQUATION_SECONDS_PER_ARC > left
+        ):
             return None
         from analysis import stateeq  # z3 and the invariants: only when a search gave up
 

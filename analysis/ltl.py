@@ -225,14 +225,16 @@ def check_ltl(
             fair for all of them count.
         max_product_edges: refuse past this many reachable product edges (unless a
             counterexample turned up within them); ``None`` for no limit.
-        budget: its clock times the check (``LtlResult.seconds``); its deadline is
-            checked between the layers of a large product (None: no limit).
+        budget: its clock times the check (``LtlResult.seconds``); its deadline and
+            memory limit are checked before the product is built and between the
+            layers of a large one (None: no limit).
 
     Raises:
         NotLtlError: ``formula`` is not LTL.
         LtlError: it names a place or transition the net does not have.
         ProductTooLarge: the edge budget ran out.
-        BudgetExceeded: the deadline of ``budget`` passed.
+        BudgetExceeded: the deadline of ``budget`` passed, or the process is (or would
+            be, with the product) over its memory limit; the reason says which.
     """
     budget = budget or Budget()
     start = budget.clock()
@@ -287,6 +289,10 @@ def check_ltl(
     per_value = np.bincount(inv, minlength=values.shape[0]).astype(np.int64)
     full = int((table[automaton.guard] @ per_value).sum())  # edges of the whole product
     search = _Search(ext, automaton, fairness, graph.dead)
+    # The command's budget before the product grows: its deadline and, for the edges
+    # about to be built (at most ``full``), its memory limit.
+    budget.check()
+    budget.check_memory(min(full, max_product_edges or full) * PRODUCT_BYTES_PER_EDGE)
     # Breadth first pays per layer: past `DEEP_LAYERS` of them it gives way to the
     # whole product when that fits the budget (a long thin graph, e.g. a counter).
     fits = max_product_edges is None or full <= max_product_edges
@@ -303,6 +309,11 @@ def check_ltl(
     if lasso is None and max_product_edges is not None and product.src.size > max_product_edges:
         raise _too_large(product.src.size, max_product_edges)
     return result(product, lasso)
+
+
+PRODUCT_BYTES_PER_EDGE = 32
+"""Upper bound of a product edge's cost (source, target, graph edge and automaton edge
+arrays, int64 at worst), asked of the memory budget before the product is built."""
 
 
 def _too_large(edges: int, budget: int) -> ProductTooLarge:

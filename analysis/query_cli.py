@@ -18,6 +18,12 @@ for ``<NAME>.xml`` or ``<stem>.<NAME>.xml`` in the model's folder.
 
 Exit codes: 0 every formula answered, 3 some could not be computed (a budget ran out),
 2 bad usage or input (a missing file, bad XML or PNML, an unknown place).
+
+``--time-limit`` bounds the whole command (every search, the z3 state equation, the
+graph, CTL labelling and LTL products); ``--memory-limit`` (default: 80 % of the
+machine's or cgroup's memory) is checked by the same searches, and an allocation that
+fails anyway ends the formulas left as ``CANNOT_COMPUTE`` with the reason, not a crash.
+Formulas the budget did not reach say ``not computed: <reason>``.
 """
 
 from __future__ import annotations
@@ -30,7 +36,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from analysis.cli_options import add_budget_options, add_output_options, output_conflict
+from analysis.cli_options import (
+    add_budget_options,
+    add_output_options,
+    memory_limit_of,
+    output_conflict,
+)
 from analysis.outcome import EXIT_INCONCLUSIVE, EXIT_OK, EXIT_USAGE
 from coral_lang.cliframe import (
     CommandParser,
@@ -200,7 +211,16 @@ def _examination_file(model: Path, name: str) -> Path:
 
 def query_main(argv: Sequence[str] | None = None) -> int:
     """Run ``coral-check query`` on its own; returns the exit code (2 on bad usage)."""
-    return run_main(build_query_parser(), argv, run_query)
+    return run_main(build_query_parser(), argv, _bounded_query)
+
+
+def _bounded_query(args: argparse.Namespace) -> int:
+    """`run_query` under the memory ceiling that coral-check's dispatcher sets for its
+    subcommands (`analysis.budget.memory_ceiling`)."""
+    from analysis.budget import memory_ceiling
+
+    with memory_ceiling(memory_limit_of(args)):
+        return run_query(args)
 
 
 def run_query(args: argparse.Namespace) -> int:
@@ -262,6 +282,7 @@ def _run(args: argparse.Namespace) -> tuple[dict[str, Any], str, bool]:
         time_limit=args.time_limit,
         max_edges=args.max_edges,
         max_product_edges=args.max_product_edges,
+        memory_limit=memory_limit_of(args),
     )
     session = QuerySession(net, limits)
     answers: list[Answer] = session.check(props)

@@ -26,7 +26,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar, Literal
 
-from analysis.budget import Budget, stage
+from analysis.budget import Budget, BudgetExceeded, stage
 from analysis.inputs import legal_trace
 from analysis.invariants import InvariantBasis
 from analysis.siphons import maximal_trap
@@ -300,7 +300,10 @@ def check_unreachable(
     if invariants is not None and invariants.kind != "P":
         raise ValueError("the state equation is strengthened with P-invariants only")
     budget = stage(budget, DEFAULT_TIME_LIMIT)
-    solver, marking, counts = _equation(net, bad, invariants)
+    try:
+        solver, marking, counts = _equation(net, bad, invariants, budget)
+    except BudgetExceeded as exc:
+        return Unknown(bad=bad, reason=f"building the constraints: {exc.reason}")
     traps: list[tuple[str, ...]] = []
     rounds = 0
     while True:
@@ -385,10 +388,16 @@ def _sparse_rows(net: Net) -> list[dict[int, int]]:
     return rows
 
 
+EQUATION_CHECK_ROWS = 256
+"""Rows of the equation built between two looks at the budget (z3's Python API takes
+about 100 us an arc, so a wide net's constraints alone can outlast a time limit)."""
+
+
 def _equation(
-    net: Net, bad: BadMarkings, invariants: InvariantBasis | None
+    net: Net, bad: BadMarkings, invariants: InvariantBasis | None, budget: Budget | None = None
 ) -> tuple[z3.Solver, list[z3.ArithRef], list[z3.ArithRef]]:
-    """The solver with M = M0 + C x, x >= 0, M >= 0, invariants and the bad set."""
+    """The solver with M = M0 + C x, x >= 0, M >= 0, invariants and the bad set; past
+    ``budget`` (checked every `EQUATION_CHECK_ROWS` rows) `BudgetExceeded`."""
     import z3
 
     rows = _sparse_rows(net)
@@ -398,6 +407,8 @@ def _equation(
     solver = z3.Solver()
     solver.add(*[x >= 0 for x in counts], *[m >= 0 for m in marking])
     for p, row in enumerate(rows):
+        if budget is not None and p % EQUATION_CHECK_ROWS == 0:
+            budget.check()
         flow = [c * counts[t] for t, c in sorted(row.items()) if c]
         solver.add(marking[p] == m0[p] + z3.Sum(flow) if flow else marking[p] == m0[p])
     if invariants is not None:
@@ -410,7 +421,9 @@ def _equation(
             lhs >= c.bound if c.op == ">=" else lhs <= c.bound if c.op == "<=" else lhs == c.bound
         )
     if bad.dead:
-        for tr in _engine(net):
+        for k, tr in enumerate(_engine(net)):
+            if budget is not None and k % EQUATION_CHECK_ROWS == 0:
+                budget.check()
             # Disabled: some input place holds fewer tokens than the arc needs. A
             # transition without inputs is always enabled, so Or([]) = False is right.
             solver.add(z3.Or([marking[net.place_index(p)] < w for p, w in tr.inputs]))

@@ -16,6 +16,7 @@ into verdicts with evidence (see ``docs/analysis-methods.md``).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import TYPE_CHECKING
@@ -23,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from analysis.budget import Budget, stage
+from analysis.budget import Budget, BudgetExceeded, stage
 from coral_lang.net import Net
 
 if TYPE_CHECKING:
@@ -34,6 +35,8 @@ IntMatrix = npt.NDArray[np.int64]
 DEFAULT_QUERY_SECONDS = 10.0
 """Cap of one z3 query, in seconds (`analysis.budget.Budget.z3_timeout_ms` converts)."""
 PER_PLACE_SECONDS = 30.0
+BUILD_CHECK_COLUMNS = 256
+"""Columns of ``y^T C <= 0`` built between two looks at the budget."""
 """Default time limit of `structural_boundedness` (the per-place LPs take most of it)."""
 MAX_DENSE_CELLS = 25_000_000
 """Places x transitions `incidence` builds: three int64 matrices of this many cells
@@ -335,33 +338,47 @@ def structural_boundedness(
     effects = _effects(net)
     names = net.place_names
     m0 = net.initial_marking()
-    y = [z3.Real(f"y_{i}") for i in range(len(names))]
+    unit = _unit_weighting(effects)
+    # One z3 variable a place: only when an LP will be built (about 40 us each).
+    y = [z3.Real(f"y_{i}") for i in range(len(names))] if per_place or not unit else []
     reasons: list[str] = []
 
     def column_constraints() -> list[z3.BoolRef]:
-        return [
-            z3.Sum([c * y[p] for p, c in sorted(column.items())] or [z3.RealVal(0)]) <= 0
-            for column in effects
-        ]
+        built = []
+        for k, column in enumerate(effects):
+            if k % BUILD_CHECK_COLUMNS == 0:
+                budget.check()  # z3's Python API: about 100 us an arc
+            built.append(
+                z3.Sum([c * y[p] for p, c in sorted(column.items())] or [z3.RealVal(0)]) <= 0
+            )
+        return built
 
-    solver = z3.Solver()
-    solver.set("timeout", budget.z3_timeout_ms(query_seconds))
-    solver.add(*[v >= 1 for v in y], *column_constraints())
-    status = solver.check()
     weights: dict[str, Fraction] | None = None
     decided: bool | None
-    if status == z3.sat:
-        model = solver.model()
-        weights = {
-            names[i]: _to_fraction(model.eval(y[i], model_completion=True))
-            for i in range(len(names))
-        }
+    if unit:
+        # y = 1 everywhere already satisfies y^T C <= 0: no transition makes tokens.
+        weights = dict.fromkeys(names, Fraction(1))
         decided = True
-    elif status == z3.unsat:
-        decided = False
     else:
-        decided = None
-        reasons.append(f"global LP: {solver.reason_unknown()}")
+        solver = z3.Solver()
+        try:
+            solver.add(*[v >= 1 for v in y], *column_constraints())
+        except BudgetExceeded as exc:
+            return StructuralBoundedness(None, None, {}, names, f"global LP: {exc.reason}")
+        solver.set("timeout", budget.z3_timeout_ms(query_seconds))
+        status = solver.check()
+        if status == z3.sat:
+            model = solver.model()
+            weights = {
+                names[i]: _to_fraction(model.eval(y[i], model_completion=True))
+                for i in range(len(names))
+            }
+            decided = True
+        elif status == z3.unsat:
+            decided = False
+        else:
+            decided = None
+            reasons.append(f"global LP: {solver.reason_unknown()}")
 
     bounds: dict[str, int] = {}
     if weights is not None:
@@ -373,8 +390,13 @@ def structural_boundedness(
             if budget.expired():
                 reasons.append(f"per-place bounds stopped: {budget.time_reason(i, 'place')}")
                 break
+            try:
+                columns = column_constraints()
+            except BudgetExceeded as exc:
+                reasons.append(f"per-place bounds stopped: {exc.reason}")
+                break
             timeout_ms = budget.z3_timeout_ms(query_seconds)
-            best = _place_bound(y, i, m0, column_constraints(), timeout_ms)
+            best = _place_bound(y, i, m0, columns, timeout_ms)
             if isinstance(best, str):
                 reasons.append(f"{name}: {best}")
             elif best is not None:
@@ -387,6 +409,13 @@ def structural_boundedness(
         unproven=unproven,
         reason="; ".join(reasons),
     )
+
+
+def _unit_weighting(effects: Sequence[Mapping[int, int]]) -> bool:
+    """Whether no transition puts out more tokens than it takes (every column of C sums
+    to at most 0): then y = 1 is a weighting with y^T C <= 0, found in one pass over
+    the arcs instead of an LP (true of most MCC nets, which conserve their tokens)."""
+    return all(sum(column.values()) <= 0 for column in effects)
 
 
 def _place_bound(

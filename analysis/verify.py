@@ -216,7 +216,11 @@ def run_verification(
         if left is not None:
             limit = left if timed_options.time_limit_s is None else timed_options.time_limit_s
             timed_options = replace(timed_options, time_limit_s=min(limit, left))
-        properties, timed = _timed(net, profiles, timed_options, properties)
+        timed_options = replace(timed_options, memory_limit=budget.memory)
+        try:
+            properties, timed = _timed(net, profiles, timed_options, properties)
+        except MemoryError:
+            properties.append(_out_of_memory(budget, checker, "timed analysis"))
     structure: dict[str, object] = {}
     if options.structural:
         try:

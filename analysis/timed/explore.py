@@ -20,6 +20,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+from analysis.budget import Budget, memory_limit_reason
 from analysis.report import Verdict
 from analysis.timed.eventtime import EventSemantics, EventState, NotSafe
 from analysis.timed.eventtime import Successor as EventSuccessor
@@ -152,11 +153,14 @@ class _Search:
                 node = self._add(successor, -1)
                 if node is not None:
                     self._push(queue, node)
-            deadline = (
-                None
-                if self.options.time_limit_s is None
-                else self.started + self.options.time_limit_s
+            # The command's budget: its time limit (from when the analysis started) and
+            # memory limit; the reason is analysis.budget's, as every other stage's.
+            limit = self.options.time_limit_s
+            budget = Budget(
+                None if limit is None else max(0.0, limit - (time.perf_counter() - self.started)),
+                memory=self.options.memory_limit,
             )
+            budget.limit = limit
             while queue:
                 if len(self.nodes) > self.options.max_states:
                     self.reason = (
@@ -164,10 +168,11 @@ class _Search:
                         "budget; raise it with --timed-states)"
                     )
                     return
-                if deadline is not None and time.perf_counter() > deadline:
+                if budget.expired():
+                    what = "--memory-limit" if budget.memory_spent else "--time-limit"
                     self.reason = (
-                        f"stopped after {self.options.time_limit_s:g} s "
-                        f"({len(self.nodes):,} symbolic states; raise it with --time-limit)"
+                        f"{budget.time_reason(len(self.nodes), 'symbolic state')} "
+                        f"(raise it with {what})"
                     )
                     return
                 _, index = heapq.heappop(queue)
@@ -194,6 +199,10 @@ class _Search:
                         return
         except EngineSpin as exc:
             self.reason = str(exc)
+            return
+        except MemoryError:
+            self.zones = {}  # the merge index: not needed for the report
+            self.reason = memory_limit_reason(self.options.memory_limit)
             return
         self.complete = True
 

@@ -20,6 +20,8 @@ class TimedOptions:
         link: bounds on the one-way delay of every message (from a link profile).
         max_states: symbolic states explored before giving up (inconclusive).
         time_limit_s: seconds before giving up (inconclusive); None: no limit.
+        memory_limit: bytes of resident memory of the process past which it gives up
+            (inconclusive, the command's ``--memory-limit``); None: no limit.
         method: ``auto`` (``events`` when the mission's commands fall into independent
             groups, else ``clock``), ``events`` (event times with partial-order
             reduction; falls back to ``clock`` for a net whose places can hold two
@@ -31,3 +33,4 @@ class TimedOptions:
     max_states: int = DEFAULT_TIMED_STATES
     time_limit_s: float | None = 60.0
     method: str = "auto"
+    memory_limit: int | None = None

@@ -215,3 +215,34 @@ def test_karp_miller_matches_the_mcc_state_space(model: dict[str, Any]) -> None:
     for query in model.get("upper_bounds") or []:
         if len(query["places"]) == 1 and query["bound"] is not None:
             assert result.bounds[query["places"][0]] == query["bound"], query["id"]
+
+
+def test_the_tree_summary_matches_a_plain_loop() -> None:
+    """`_summarise` (numpy, block by block) gives the first omega node and the largest
+    finite count per place that a loop over every node and place gives."""
+    import random
+
+    from analysis.coverability import OMEGA, SUMMARY_BLOCK, _Node, _summarise
+
+    rng = random.Random(7)
+    n_places = 6
+    nodes = [
+        _Node(
+            tuple(
+                rng.choice([OMEGA, 0, 1, 2, 5]) if rng.random() < 0.3 else rng.randrange(4)
+                for _ in range(n_places)
+            ),
+            -1,
+            -1,
+        )
+        for _ in range(2 * SUMMARY_BLOCK + 37)
+    ]
+    first: dict[int, int] = {}
+    top = [0] * n_places
+    for index, node in enumerate(nodes):
+        for p, v in enumerate(node.marking):
+            if v == OMEGA:
+                first.setdefault(p, index)
+            else:
+                top[p] = max(top[p], v)
+    assert _summarise(nodes, n_places) == (first, top)

@@ -157,13 +157,14 @@ def test_classification_matches_mcc_structural_properties(model: dict[str, Any])
 
 def test_per_place_time_limit_keeps_the_global_bounds() -> None:
     ticks = iter(range(1_000))
-    # The clock reads 0 (the budget), 1 (the function's slice of it), 2 (the global LP's
-    # time-out: 1.5 s left), 3 (before the first place: in time), 4 (its time-out),
-    # 5 (before the second place: past the deadline).
-    budget = Budget(3.5, clock=lambda: float(next(ticks)))
+    # The clock reads 0 (the budget), 1 (the function's slice of it), 2 (building the
+    # global LP), 3 (its time-out: 2.5 s left), 4 (before the first place: in time),
+    # 5 (building its LP), 6 (its time-out), 7 (before the second place: past the
+    # deadline).
+    budget = Budget(5.5, clock=lambda: float(next(ticks)))
     result = structural_boundedness(mutex(), budget=budget)
     assert result.structurally_bounded is True
-    assert "per-place bounds stopped: time limit of 3.5 s reached after 1 place" in result.reason
+    assert "per-place bounds stopped: time limit of 5.5 s reached after 1 place" in result.reason
     # The global weighting still bounds every place, just less tightly.
     assert set(result.bounds) == set(mutex().place_names)
 
@@ -336,3 +337,37 @@ def test_classify_is_linear_in_the_arcs_on_18000_transitions() -> None:
     kind = classify(net)
     assert time.perf_counter() - started < 3.0
     assert not kind.free_choice and not kind.extended_free_choice and kind.subconservative
+
+
+def test_a_net_that_makes_no_tokens_is_bounded_without_an_lp(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """No transition puts out more than it takes: y = 1 is the weighting, found from the
+    arcs alone (z3 is never asked), and the bounds follow from it."""
+    import z3
+
+    from analysis.structural import structural_boundedness
+    from tests.analysis.wide_nets import rings
+
+    def no_solver(*args: object, **kwargs: object) -> object:
+        raise AssertionError("the LP was built")
+
+    monkeypatch.setattr(z3, "Solver", no_solver)
+    net = rings(30, 4, idle=50)  # idle transitions take two tokens and give one
+    result = structural_boundedness(net, per_place=False)
+    assert result.structurally_bounded is True
+    assert result.weights is not None and set(result.weights.values()) == {1}
+    assert result.bounds["r0p0"] == 30  # every token of the net could gather there
+
+
+def test_building_the_lp_stops_at_the_deadline_with_its_reason() -> None:
+    from analysis.budget import Budget
+    from analysis.structural import structural_boundedness
+    from tests.analysis.nets import make_net
+
+    # 'split' makes a token: the unit weighting does not do, so the LP is built.
+    net = make_net("grow", {"a": 1, "b": 0}, {"split": ({"a": 1}, {"a": 1, "b": 1})})
+    result = structural_boundedness(net, per_place=False, budget=Budget(0.0))
+    assert result.structurally_bounded is None
+    assert result.reason == "global LP: time limit of 0 s reached"
+    assert structural_boundedness(net, per_place=False).structurally_bounded is False

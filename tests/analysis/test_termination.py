@@ -675,3 +675,17 @@ def test_a_mission_with_no_places_is_checked_not_crashed(
     out = capsys.readouterr()
     assert code == 1 and "Traceback" not in out.err
     assert "empty.coral: violated" in out.out  # no final marking is declared: stuck at once
+
+
+def test_termination_stops_at_the_memory_limit_and_says_so() -> None:
+    """The command's budget reaches the graph that termination needs: past its memory
+    limit the three properties are inconclusive with the memory reason."""
+    from analysis.budget import Budget
+    from analysis.termination import TerminationLimits, check_termination
+
+    net = _net(UNFAIR_ONLY)
+    results = check_termination(explore(net), TerminationLimits(), None, Budget(memory=1))
+    assert {r.key for r in results} == {NO_ENGINE_CYCLE, FINAL_ALWAYS_REACHABLE, TERMINATES}
+    for result in results:
+        assert result.verdict is Verdict.INCONCLUSIVE, result.key
+        assert "memory limit of 1 B reached" in result.detail, result.detail
