@@ -97,6 +97,9 @@ EXAMINATIONS = QUERY_EXAMINATIONS + GLOBAL_EXAMINATIONS
 
 EXPLICIT = ("EXPLICIT", "STATE_COMPRESSION")
 SYMBOLIC = ("DECISION_DIAGRAMS",)
+AUTO_SYMBOLIC_MIN_STATES = 100_000
+"""``method="auto"`` builds a decision diagram only when the explicit searches had at
+least this state budget: a smaller one asks for a small explicit search (as in verify)."""
 
 STATE_EQUATION_SECONDS = 60.0
 """Most seconds the z3 proof of deadlock freedom may take when a search gave up."""
@@ -712,6 +715,7 @@ class QuerySession:
         if (
             answer.value is None
             and self.limits.method == "auto"
+            and (self.limits.max_states or AUTO_SYMBOLIC_MIN_STATES) >= AUTO_SYMBOLIC_MIN_STATES
             and not self.out_of_time()
             and symbolic_applicable(self.net)
         ):

@@ -392,7 +392,8 @@ class _Checker:
     def figures(self) -> StateSpaceFigures:
         space = self.space
         sym = self.symbolic
-        if sym is not None and (sym.complete or not space.complete):
+        if sym is not None and (sym.complete or (not space.complete and sym.states > space.states)):
+            # the diagram's figures when exact, or when its lower bound is the better one
             return symbolic_figures(sym)
         return StateSpaceFigures(
             states=space.states,

@@ -127,7 +127,9 @@ class _Transition:
 class SymbolicNet:
     """A net's encoding in one BDD manager: the initial marking, transitions, helpers."""
 
-    def __init__(self, net: Net, bits: list[int], limits: SymbolicLimits) -> None:
+    def __init__(
+        self, net: Net, bits: list[int], limits: SymbolicLimits, deadline: _Deadline | None = None
+    ) -> None:
         self.net = net
         self.limits = limits
         self.enc = Encoding(tuple(place_order(net)), tuple(bits))
@@ -154,6 +156,8 @@ class SymbolicNet:
             for name, w in tr.outputs:
                 post[index[name]] = post.get(index[name], 0) + w
             self.transitions.append(self._transition(tr.name, pre, post))
+            if deadline is not None:
+                deadline.check()  # a wide net's relations take a while to build
         self.transitions.sort(key=lambda t: -t.top)
 
     def value(self, place: int, v: int, *, current: bool = True) -> Bdd:
@@ -366,9 +370,11 @@ def explore_symbolic(net: Net, limits: SymbolicLimits | None = None) -> Symbolic
     deadline = _Deadline(limits, start)
     while True:
         try:
-            sym = SymbolicNet(net, bits, limits)
+            sym = SymbolicNet(net, bits, limits, deadline)
             reached, sweeps, peak, reason = _fixpoint(sym, deadline)
             break
+        except _Budget as exc:
+            return _stopped(net, bits, start, f"{exc} (building the transition relations)")
         except _Overflow as over:
             wide = [p for p in over.places if bits[p] + 1 > limits.max_bits]
             if wide:
