@@ -52,6 +52,7 @@ __all__ = [
     "add_config_options",
     "add_explain_option",
     "add_files_argument",
+    "add_method_option",
     "add_output_options",
     "add_profile_options",
     "add_rule_options",
@@ -383,9 +384,27 @@ def memory_limit_of(args: argparse.Namespace) -> int | None:
     return default_memory_limit()
 
 
+METHODS = ("auto", "explicit", "symbolic")
+
+
+def add_method_option(group: argparse._ArgumentGroup, what: str) -> None:
+    """``--method {auto,explicit,symbolic}``: how the state space is built; ``what``
+    names the answers a decision diagram gives in that command."""
+    group.add_argument(
+        "--method",
+        choices=METHODS,
+        default="auto",
+        help="state space method: 'explicit' (every marking stored; shortest traces), "
+        f"'symbolic' (a decision diagram: {what} on nets no explicit search can store), "
+        "or 'auto' (explicit, then symbolic when the explicit search stops before the "
+        "end); the report says which produced the figures (default auto)",
+    )
+
+
 def add_search_options(parser: argparse.ArgumentParser) -> None:
     """The verification's budgets (`add_budget_options`) and switches."""
     group = add_budget_options(parser)
+    add_method_option(group, "exact state count, place bounds, boundedness and deadlock")
     group.add_argument(
         "--por",
         action=argparse.BooleanOptionalAction,
@@ -497,6 +516,7 @@ class Settings:
             max_edges=self.values["max_edges"],
             timed=self.timed_options(),
             memory_limit=memory_limit_of(args),
+            method=getattr(args, "method", "auto"),
         )
 
     def timed_options(self) -> TimedOptions | None:

@@ -37,7 +37,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -48,6 +48,7 @@ from analysis.ctl import CtlChecker, CtlError, NetIndex, StateEvaluator, marking
 from analysis.mccxml import MccProperty, PlaceBound
 from analysis.stategraph import GraphError, StateGraph, build_graph, scc_labels
 from analysis.statespace import STOPPED_BY_REQUEST, StateSpace, explore
+from analysis.symbolic.report import symbolic_applicable
 from coral_lang.formula import (
     All,
     Exists,
@@ -62,6 +63,9 @@ from coral_lang.formula import (
     transitions_of,
 )
 from coral_lang.net import Net
+
+if TYPE_CHECKING:
+    from analysis.symbolic.explore import SymbolicResult
 
 __all__ = [
     "EXAMINATIONS",
@@ -94,6 +98,10 @@ EXAMINATIONS = QUERY_EXAMINATIONS + GLOBAL_EXAMINATIONS
 EXPLICIT = ("EXPLICIT", "STATE_COMPRESSION")
 REDUCED = ("STRUCTURAL_REDUCTION", *EXPLICIT)
 """Techniques of an answer read on the structurally reduced net (`analysis.reduce`)."""
+SYMBOLIC = ("DECISION_DIAGRAMS",)
+AUTO_SYMBOLIC_MIN_STATES = 100_000
+"""``method="auto"`` builds a decision diagram only when the explicit searches had at
+least this state budget: a smaller one asks for a small explicit search (as in verify)."""
 
 STATE_EQUATION_SECONDS = 60.0
 """Most seconds the z3 proof of deadlock freedom may take when a search gave up."""
@@ -143,6 +151,9 @@ class QueryLimits:
             undecided are tried on the structurally reduced net (`analysis.reduce`).
         memory_limit: bytes of resident memory the process may use (checked by every
             search, the graph, the LTL product and CTL labelling through the budget).
+        method: "explicit", "symbolic" (ReachabilityDeadlock and the state count from a
+            decision diagram, `analysis.symbolic`) or "auto" (explicit, then symbolic
+            when the explicit searches stop before deciding).
     """
 
     max_states: int | None = DEFAULT_MAX_STATES
@@ -151,6 +162,7 @@ class QueryLimits:
     max_product_edges: int | None = DEFAULT_MAX_PRODUCT_EDGES
     reductions: bool = True
     memory_limit: int | None = None
+    method: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -286,6 +298,7 @@ class QuerySession:
         self._ctl: CtlChecker | None = None
         self._reduced: StateSpace | None = None
         self._invariants: list[tuple[int, ...]] | None = None
+        self.symbolic: SymbolicResult | None = None
 
     # -- budgets and shared work ---------------------------------------------------------
 
@@ -764,11 +777,51 @@ class QuerySession:
             "", None, method="global", reason=f"state space incomplete: {space.stopped_reason}"
         )
 
+    def symbolic_space(self, share: float = 1.0) -> SymbolicResult:
+        """The reachable markings as a decision diagram (`analysis.symbolic`), built once
+        with ``share`` of the time left."""
+        if self.symbolic is None:
+            from analysis.symbolic.explore import SymbolicLimits, explore_symbolic
+
+            left = self.remaining()
+            budget = self.budget.child(seconds=None if left is None else left * share)
+            start = self.clock()
+            self.symbolic = explore_symbolic(self.net, SymbolicLimits(budget=budget))
+            self.shared_seconds += self.clock() - start
+        return self.symbolic
+
+    def _symbolic_deadlock(self, share: float) -> Answer:
+        """ReachabilityDeadlock from the decision diagram: TRUE with a shortest trace to
+        a dead marking, FALSE when the complete diagram holds none."""
+        result = self.symbolic_space(share)
+        if result.deadlock is True:
+            trace = None if result.deadlock_trace is None else tuple(result.deadlock_trace)
+            return Answer("", True, SYMBOLIC, method="global", trace=trace)
+        if result.complete:
+            return Answer("", False, SYMBOLIC, method="global")
+        return Answer("", None, method="global", reason=f"symbolic: {result.reason}")
+
     def _deadlock(self) -> Answer:
-        """The full search first (the fastest explorer, shared with the other
+        """With ``method="symbolic"``, the decision diagram alone; else the full search
+        first (the fastest explorer, shared with the other
         examinations); when its budget stops it, a z3 proof that no dead marking is
         reachable (state equation and traps: answers FALSE without exploring), then a
-        deadlock-preserving stubborn-set search, which often stores far fewer markings."""
+        deadlock-preserving stubborn-set search, which often stores far fewer markings;
+        with ``method="auto"``, the decision diagram last."""
+        if self.limits.method == "symbolic":
+            return self._symbolic_deadlock(1.0)
+        answer = self._deadlock_explicit()
+        if (
+            answer.value is None
+            and self.limits.method == "auto"
+            and (self.limits.max_states or AUTO_SYMBOLIC_MIN_STATES) >= AUTO_SYMBOLIC_MIN_STATES
+            and not self.out_of_time()
+            and symbolic_applicable(self.net)
+        ):
+            return self._symbolic_deadlock(1.0)
+        return answer
+
+    def _deadlock_explicit(self) -> Answer:
         if self.space is None and not self.out_of_time():
             by_reduction = self._deadlock_by_reduction()
             if by_reduction is not None:

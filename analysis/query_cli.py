@@ -38,6 +38,7 @@ from typing import Any
 
 from analysis.cli_options import (
     add_budget_options,
+    add_method_option,
     add_output_options,
     memory_limit_of,
     output_conflict,
@@ -176,6 +177,7 @@ def configure_query(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help=f"edges of one LTL product (default {DEFAULT_MAX_PRODUCT_EDGES})",
     )
+    add_method_option(budgets, "ReachabilityDeadlock and the state count")
 
 
 def _error(message: str) -> None:
@@ -283,19 +285,27 @@ def _run(args: argparse.Namespace) -> tuple[dict[str, Any], str, bool]:
         max_edges=args.max_edges,
         max_product_edges=args.max_product_edges,
         memory_limit=memory_limit_of(args),
+        method=args.method,
     )
     session = QuerySession(net, limits)
     answers: list[Answer] = session.check(props)
     answers += [session.check_global(name) for name in globals_]
     lines = "".join(a.mcc_line() + "\n" for a in answers)
     space = session.space
+    figures: dict[str, Any] = {
+        "method": None if space is None else "explicit",
+        "states": None if space is None else space.states,
+        "complete": None if space is None else space.complete,
+    }
+    symbolic = session.symbolic
+    if symbolic is not None and (space is None or not space.complete or symbolic.complete):
+        figures = {"method": "symbolic", "states": symbolic.states, "complete": symbolic.complete}
     document: dict[str, Any] = {
         "tool": "coral-check query",
         "model": net.name,
         "file": str(model),
         "queries": [str(f) for f in files],
-        "states": None if space is None else space.states,
-        "complete": None if space is None else space.complete,
+        **figures,
         "shared_seconds": round(session.shared_seconds, 6),
         "seconds": round(time.perf_counter() - started, 6),
         "answered": sum(a.computed for a in answers),

@@ -310,10 +310,15 @@ class StateSpaceFigures:
     state: less than `bytes_per_state`, which also counts temporaries and the
     allocator's slack."""
     reduction_note: str | None = None
+    method: str = "explicit"
+    """Which method produced these figures: "explicit" (the explicit search, reduced
+    when `reduced`) or "symbolic" (a decision diagram: `edges` and the bytes per state
+    are then 0)."""
 
     def to_dict(self) -> dict[str, object]:
         """JSON form."""
         return {
+            "method": self.method,
             "states": self.states,
             "edges": self.edges,
             "max_tokens_place": self.max_tokens_place,
@@ -426,7 +431,11 @@ class Report:
         space = self.statespace
         lines = [
             f"net '{self.net_name}'  {self.digest}",
-            f"state space: {space.states} states, {space.edges} edges"
+            (
+                f"state space: {space.states} states, {space.edges} edges"
+                if space.method == "explicit"
+                else f"state space ({space.method}): {space.states} states"
+            )
             + ("" if space.complete else f" (incomplete: {space.stopped_reason})")
             + _reduction_text(space)
             + f"; at most {space.max_tokens_place} token(s) in a place, "

@@ -45,6 +45,12 @@ from analysis.report import (
 )
 from analysis.stategraph import GraphError, StateGraph, build_graph
 from analysis.statespace import StateSpace, explore
+from analysis.symbolic.report import (
+    SYMBOLIC,
+    symbolic_applicable,
+    symbolic_deadlock,
+    symbolic_figures,
+)
 from analysis.termination import (
     DEFAULT_MAX_DEADLOCKS,
     DEFAULT_MAX_EDGES,
@@ -62,6 +68,7 @@ if TYPE_CHECKING:
     # Imported where the state equation runs: with the invariants and siphons it needs,
     # it costs tens of milliseconds that a completely explored net never has to pay.
     from analysis import stateeq
+    from analysis.symbolic.explore import SymbolicResult
     from analysis.timed.results import TimedReport
     from analysis.timed.schedule import TimedSchedule
     from coral_lang.profile import VehicleProfile
@@ -83,6 +90,10 @@ REALISE_NODES = 20_000  # firing orders tried to turn a state-equation solution 
 UNBOUNDED_SECONDS = 3.0
 EXPLICIT_POR = "explicit state space (stubborn-set reduced)"
 REDUCED = "structural reductions + explicit state space of the reduced net"
+AUTO_SYMBOLIC_SHARE = 0.5  # of the time left, for decision diagrams after an explicit stop
+AUTO_SYMBOLIC_MIN_STATES = 100_000
+"""`--method auto` tries decision diagrams after an incomplete explicit search only when
+its state budget was at least this: a smaller one asks for a small explicit search."""
 TIMED = "timed analysis (zones)"
 UNTIMED_WITHIN = "decided by timed analysis: run coral-check verify --timed"
 NO_PROFILE = "no vehicle profile: timed analysis needs the mission's profile"
@@ -117,6 +128,11 @@ class VerifyOptions:
         memory_limit: Bytes of resident memory the process may use (None: the caller's
             budget's, or none). Past it the search stops, the verdicts it left open are
             "inconclusive: memory limit of X reached after N states", never a crash.
+        method: "explicit", "symbolic" (the reachable markings as a decision diagram,
+            `analysis.symbolic`: exact counts, bounds, boundedness and deadlock on nets
+            no explicit search can store) or "auto" (explicit, then symbolic when the
+            explicit search stopped before the end on a net the diagrams model, with a
+            state budget of at least `AUTO_SYMBOLIC_MIN_STATES`).
     """
 
     max_states: int | None = 2_000_000
@@ -130,6 +146,7 @@ class VerifyOptions:
     max_edges: int | None = DEFAULT_MAX_EDGES
     timed: TimedOptions | None = None
     memory_limit: int | None = None
+    method: str = "auto"
 
 
 def verify(
@@ -300,7 +317,15 @@ class _Checker:
             max_nodes=QUICK_COVERABILITY_NODES,
             budget=budget.child(seconds=QUICK_COVERABILITY_SECONDS),
         )
+        self.symbolic: SymbolicResult | None = None
+        if options.method == "symbolic":
+            self.symbolic = self._symbolic(SEARCH_SHARE)
         max_states, time_limit = options.max_states, options.time_limit
+        if self.symbolic is not None and self.symbolic.complete:
+            # the diagram holds every answer it can give: the explicit search only looks
+            # for counterexamples (with shortest traces) to the other properties
+            max_states = min(max_states or UNBOUNDED_STATES, UNBOUNDED_STATES)
+            time_limit = min(time_limit or UNBOUNDED_SECONDS, UNBOUNDED_SECONDS)
         if self.cover.bounded is False:
             max_states = min(max_states or UNBOUNDED_STATES, UNBOUNDED_STATES)
             time_limit = min(time_limit or UNBOUNDED_SECONDS, UNBOUNDED_SECONDS)
@@ -324,6 +349,31 @@ class _Checker:
         self.exact = self.space.complete and not self.space.reduced
         self.method = EXPLICIT_POR if self.space.reduced else EXPLICIT
         self._graph: StateGraph | GraphError | None = None
+        if (
+            options.method == "auto"
+            and not self.space.complete
+            and not self.space.reduced
+            and self.cover.bounded is not False
+            and (options.max_states is None or options.max_states >= AUTO_SYMBOLIC_MIN_STATES)
+            and symbolic_applicable(net)
+        ):
+            self.symbolic = self._symbolic(AUTO_SYMBOLIC_SHARE)
+
+    def _symbolic(self, share: float) -> SymbolicResult:
+        """The reachable markings as a decision diagram, with ``share`` of the time
+        left (and the command's memory limit, through its budget)."""
+        from analysis.symbolic.explore import SymbolicLimits, explore_symbolic
+
+        left = self.budget.remaining()
+        budget = self.budget.child(seconds=None if left is None else left * share)
+        return explore_symbolic(self.net, SymbolicLimits(budget=budget))
+
+    @property
+    def symbolic_exact(self) -> SymbolicResult | None:
+        """The symbolic result when it is complete (every reachable marking), else None."""
+        if self.symbolic is not None and self.symbolic.complete:
+            return self.symbolic
+        return None
 
     # -- helpers ------------------------------------------------------------------------
 
@@ -346,6 +396,10 @@ class _Checker:
 
     def figures(self) -> StateSpaceFigures:
         space = self.space
+        sym = self.symbolic
+        if sym is not None and (sym.complete or (not space.complete and sym.states > space.states)):
+            # the diagram's figures when exact, or when its lower bound is the better one
+            return symbolic_figures(sym)
         return StateSpaceFigures(
             states=space.states,
             edges=space.edges,
@@ -473,6 +527,16 @@ class _Checker:
 
     def bounded(self) -> PropertyResult:
         title = "the net is bounded"
+        sym = self.symbolic_exact
+        if sym is not None and (not self.exact or self.options.method == "symbolic"):
+            return PropertyResult(
+                "bounded",
+                title,
+                Verdict.PROVEN,
+                SYMBOLIC,
+                f"every place holds at most {sym.max_tokens_place} token(s) "
+                f"in all {sym.states} reachable states",
+            )
         if self.exact:
             return PropertyResult(
                 "bounded",
@@ -538,7 +602,13 @@ class _Checker:
         title = "no deadlock (every dead marking is a declared final marking)"
         if not net.finals:
             title = "no deadlock (no reachable marking without an enabled transition)"
+        sym = self.symbolic_exact
         stuck = non_final_dead_states(self.space)
+        asked = self.options.method == "symbolic"
+        if sym is not None and (asked or (not self.space.complete and not stuck.size)):
+            decided = symbolic_deadlock(net, sym, title)
+            if decided is not None:
+                return decided
         if stuck.size:
             state = int(stuck[0])
             depth = self.space.depth_of(state)

@@ -1,10 +1,13 @@
 """States, seconds and peak memory of `--method symbolic` (analysis/symbolic) on the
 larger conformance instances and on generated nets with more than 10^9 states.
 
-    PYTHONPATH=$PWD python bench/symbolic.py [--time-limit S] [--models A,B]
+    PYTHONPATH=$PWD python bench/symbolic.py [--time-limit S] [--models A,B] [--no-explicit]
 
 Each instance runs in a child process so that its peak resident memory (ru_maxrss)
-is its own; the oracle's state count is printed beside ours where known.
+is its own; the oracle's state count is printed beside ours where known. The explicit
+explorer (`analysis.statespace.explore`, full search, same time limit, at most
+`EXPLICIT_STATES` states) runs beside it in its own child: its states/s and peak
+memory, or why it stopped.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ LARGE = [
     "Referendum-PT-0015",
 ]
 GENERATED = ["cycles:40", "cycles:120", "ring:40:12", "ring:60:20"]
+EXPLICIT_STATES = 50_000_000
 
 
 def _net(spec: str) -> object:
@@ -75,29 +79,72 @@ def _child(spec: str, time_limit: float) -> None:
     )
 
 
+def _explicit_child(spec: str, time_limit: float) -> None:
+    from analysis.budget import Budget
+    from analysis.statespace import explore
+
+    space = explore(_net(spec), max_states=EXPLICIT_STATES, budget=Budget(time_limit))  # type: ignore[arg-type]
+    peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    rate = space.states / space.seconds if space.seconds > 0 else 0.0
+    print(
+        json.dumps(
+            {
+                "states": space.states,
+                "complete": space.complete,
+                "reason": space.stopped_reason,
+                "rate": round(rate),
+                "peak_mib": round(peak_kib / 1024),
+            }
+        )
+    )
+
+
+def _run(flag: str, spec: str, time_limit: float) -> dict[str, object] | str:
+    cmd = [sys.executable, __file__, flag, spec, "--time-limit", str(time_limit)]
+    out = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if out.returncode != 0:
+        return f"failed: {out.stderr.strip().splitlines()[-1:]}"
+    row: dict[str, object] = json.loads(out.stdout.strip().splitlines()[-1])
+    return row
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--time-limit", type=float, default=60.0)
     parser.add_argument("--models", default=",".join(GENERATED + LARGE))
+    parser.add_argument("--no-explicit", action="store_true", help="symbolic only")
     parser.add_argument("--child", help=argparse.SUPPRESS)
+    parser.add_argument("--explicit-child", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         _child(args.child, args.time_limit)
         return
+    if args.explicit_child:
+        _explicit_child(args.explicit_child, args.time_limit)
+        return
     oracle = {m["model"]: m for m in yaml.safe_load((ROOT / "oracle.yaml").read_text())["models"]}
-    print(f"{'instance':28} {'states':>26} {'oracle':>12} {'s':>8} {'MiB':>6}  note")
+    print(
+        f"{'instance':28} {'states':>26} {'oracle':>12} {'s':>8} {'MiB':>6}  "
+        f"{'explicit st/s':>13} {'MiB':>6}  note"
+    )
     for spec in args.models.split(","):
-        cmd = [sys.executable, __file__, "--child", spec, "--time-limit", str(args.time_limit)]
-        out = subprocess.run(cmd, capture_output=True, text=True, check=False)
-        if out.returncode != 0:
-            print(f"{spec:28} failed: {out.stderr.strip().splitlines()[-1:]}")
+        row = _run("--child", spec, args.time_limit)
+        if isinstance(row, str):
+            print(f"{spec:28} {row}")
             continue
-        row = json.loads(out.stdout.strip().splitlines()[-1])
+        explicit: dict[str, object] | str = "not run"
+        if not args.no_explicit:
+            explicit = _run("--explicit-child", spec, args.time_limit)
+        if isinstance(explicit, dict):
+            done = "" if explicit["complete"] else f" (stopped: {explicit['reason']})"
+            side = f"{explicit['rate']!s:>13} {explicit['peak_mib']!s:>6}"
+        else:
+            done, side = f" (explicit {explicit})", f"{'-':>13} {'-':>6}"
         expected = oracle.get(spec, {}).get("states", "")
         note = "complete" if row["complete"] else f"inconclusive: {row['reason']}"
         print(
-            f"{spec:28} {row['states']:>26} {expected!s:>12} {row['seconds']:>8} "
-            f"{row['peak_mib']:>6}  {note}",
+            f"{spec:28} {row['states']!s:>26} {expected!s:>12} {row['seconds']!s:>8} "
+            f"{row['peak_mib']!s:>6}  {side}  {note}{done}",
             flush=True,
         )
 

@@ -13,11 +13,12 @@ is taken, the encoding widened and the fixpoint restarted: a value never wraps.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import dd.cudd as cudd
 
+from analysis.budget import Budget, memory_limit_reason, resident_bytes
 from analysis.symbolic.encoding import Encoding, initial_bits, place_order
 from coral_lang.net import Net
 
@@ -33,6 +34,17 @@ class SymbolicLimits:
     max_nodes: int | None = 50_000_000
     max_bits: int = 16
     max_memory: int | None = None  # bytes for CUDD's tables; None: CUDD's default
+    budget: Budget | None = None
+    """The command's budget: its deadline and memory limit bound the run too (checked
+    after every transition's image, and inside counting and the trace search)."""
+    trace: bool = True
+    """Search a firing sequence to the deadlock witness (backward layers of preimages)."""
+
+
+BYTES_PER_NODE = 48
+"""What one CUDD node costs with its share of the unique table and computed cache: the
+memory limit becomes a node budget, checked after every image (an allocation CUDD
+cannot make is caught too, but the node budget stops the run well before)."""
 
 
 @dataclass
@@ -62,7 +74,42 @@ class _Overflow(Exception):
 
 
 class _Budget(Exception):
-    pass
+    """A budget ran out in a pass after the fixpoint; the message says which."""
+
+
+class _Deadline:
+    """The limits of one run as one check: the time limit from `start`, the command
+    budget's deadline and memory limit, and the node budget (from `max_nodes` and the
+    memory left when the run started). `reason()` is None while every limit holds."""
+
+    def __init__(self, limits: SymbolicLimits, start: float) -> None:
+        self.limits = limits
+        self.start = start
+        self.max_nodes = limits.max_nodes
+        self.memory_reason: str | None = None
+        budget = limits.budget
+        if budget is not None and budget.memory is not None:
+            spare = max(0, budget.memory - resident_bytes()) // BYTES_PER_NODE
+            if self.max_nodes is None or spare < self.max_nodes:
+                self.max_nodes = spare
+                self.memory_reason = memory_limit_reason(budget.memory)
+
+    def reason(self, nodes: int = 0) -> str | None:
+        limits = self.limits
+        if limits.time_limit is not None and time.monotonic() - self.start > limits.time_limit:
+            return f"time limit of {limits.time_limit:g} s"
+        budget = limits.budget
+        if budget is not None and budget.expired():
+            return budget.time_reason()
+        if self.max_nodes is not None and nodes > self.max_nodes:
+            return self.memory_reason or f"node budget of {self.max_nodes} BDD nodes"
+        return None
+
+    def check(self) -> None:
+        """Raise `_Budget` once a limit is passed (for the passes after the fixpoint)."""
+        reason = self.reason()
+        if reason is not None:
+            raise _Budget(reason)
 
 
 @dataclass
@@ -80,13 +127,21 @@ class _Transition:
 class SymbolicNet:
     """A net's encoding in one BDD manager: the initial marking, transitions, helpers."""
 
-    def __init__(self, net: Net, bits: list[int], limits: SymbolicLimits) -> None:
+    def __init__(
+        self, net: Net, bits: list[int], limits: SymbolicLimits, deadline: _Deadline | None = None
+    ) -> None:
         self.net = net
+        self.limits = limits
         self.enc = Encoding(tuple(place_order(net)), tuple(bits))
         self.bdd = cudd.BDD()
         self.bdd.configure(reordering=False)
-        if limits.max_memory is not None:
-            self.bdd.configure(max_memory=limits.max_memory)
+        max_memory = limits.max_memory
+        budget = limits.budget
+        if budget is not None and budget.memory is not None:
+            spare = max(1 << 24, budget.memory - resident_bytes())
+            max_memory = spare if max_memory is None else min(max_memory, spare)
+        if max_memory is not None:
+            self.bdd.configure(max_memory=max_memory)
         self.bdd.declare(*self.enc.declaration())
         self.level_of_place = {p: i for i, p in enumerate(self.enc.order)}
         self.xvars = [v for p in self.enc.order for v in self.enc.xs(p)]
@@ -101,6 +156,8 @@ class SymbolicNet:
             for name, w in tr.outputs:
                 post[index[name]] = post.get(index[name], 0) + w
             self.transitions.append(self._transition(tr.name, pre, post))
+            if deadline is not None:
+                deadline.check()  # a wide net's relations take a while to build
         self.transitions.sort(key=lambda t: -t.top)
 
     def value(self, place: int, v: int, *, current: bool = True) -> Bdd:
@@ -168,46 +225,114 @@ class SymbolicNet:
             return states & t.relation
         return self.bdd.let(t.rename, cudd.and_exists(states, t.relation, t.qvars))
 
+    def preimage(self, states: Bdd, t: _Transition) -> Bdd:
+        """Markings from which `t` leads into `states`: rename the changed places' x
+        bits to y, then conjoin with the relation and quantify the y bits away."""
+        if not t.changed:
+            return states & t.relation
+        back = {x: y for y, x in t.rename.items()}
+        return cudd.and_exists(self.bdd.let(back, states), t.relation, set(t.rename))
+
+    def contains(self, states: Bdd, marking: list[int]) -> bool:
+        return bool((states & self.marking_cube(marking, current=True)) != self.bdd.false)
+
     def overflowing(self, states: Bdd, t: _Transition) -> set[int]:
         """Places `t` would push past their counters from some marking of `states`."""
         false = self.bdd.false
         return {p for p, cond in t.overflow.items() if cond != false and (states & cond) != false}
 
 
-def _fixpoint(
-    sym: SymbolicNet, limits: SymbolicLimits, start: float
-) -> tuple[Bdd, int, int, str | None]:
-    """Chained fixpoint; returns (reached, sweeps, peak nodes, reason it stopped early)."""
+def _fixpoint(sym: SymbolicNet, limits: _Deadline) -> tuple[Bdd, int, int, str | None]:
+    """Chained fixpoint over frontiers; returns (reached, sweeps, peak nodes, reason it
+    stopped early).
+
+    Each transition's image is taken of the frontier only (the markings it has not yet
+    been applied to), and what it adds joins the frontier at once, so the transitions
+    after it in the chain see it in the same sweep. A marking added by a transition
+    has met only the transitions after it: the next sweep's frontier is everything the
+    sweep added. The fixpoint is reached when a sweep adds nothing."""
     reached = sym.initial
+    frontier = sym.initial
     sweeps = 0
     peak = len(sym.bdd)
     overflow: set[int] = set()
-    while True:
+    false = sym.bdd.false
+    while frontier != false:
         sweeps += 1
-        before = reached
+        added = false
         for t in sym.transitions:
-            overflow |= sym.overflowing(reached, t)
-            reached = reached | sym.image(reached, t)
+            overflow |= sym.overflowing(frontier, t)
+            new = sym.image(frontier, t) & ~reached
+            if new != false:
+                reached |= new
+                frontier |= new
+                added |= new
             nodes = len(sym.bdd)
             peak = max(peak, nodes)
-            if limits.time_limit is not None and time.monotonic() - start > limits.time_limit:
-                return reached, sweeps, peak, f"time limit of {limits.time_limit:g} s"
-            if limits.max_nodes is not None and nodes > limits.max_nodes:
-                return reached, sweeps, peak, f"node budget of {limits.max_nodes} BDD nodes"
-        if reached == before:
-            if overflow:
-                # every counter that overflows within the markings its bits can hold,
-                # found in one fixpoint: widen them all at once, then start again
-                raise _Overflow(overflow)
-            return reached, sweeps, peak, None
+            reason = limits.reason(nodes)
+            if reason is not None:
+                return reached, sweeps, peak, reason
+        frontier = added
+    if overflow:
+        # every counter that overflows within the markings its bits can hold, found in
+        # one fixpoint: widen them all at once, then start again
+        raise _Overflow(overflow)
+    return reached, sweeps, peak, None
 
 
-def _max_value(sym: SymbolicNet, states: Bdd, place: int) -> int:
+def deadlock_trace(sym: SymbolicNet, reached: Bdd, dead: list[int], limits: _Deadline) -> list[str]:
+    """A shortest firing sequence from the initial marking to the marking `dead`.
+
+    Backward breadth-first layers of preimages inside `reached` (layer k: the markings
+    k firings away from `dead`) until the initial marking is in one; then a forward
+    walk on concrete markings, firing at each step a transition whose successor lies in
+    the next layer down. Raises `_Budget` when a limit runs out."""
+    false = sym.bdd.false
+    layers = [sym.marking_cube(dead, current=True)]
+    seen = layers[0]
+    while not sym.contains(layers[-1], [p.initial for p in sym.net.places]):
+        layer = false
+        for t in sym.transitions:
+            layer |= sym.preimage(layers[-1], t)
+            limits.check()
+        layer &= reached & ~seen
+        if layer == false:
+            raise _Budget("the dead marking is not reachable backwards (internal error)")
+        seen |= layer
+        layers.append(layer)
+    index = {p.name: i for i, p in enumerate(sym.net.places)}
+    marking = [p.initial for p in sym.net.places]
+    trace: list[str] = []
+    for layer in reversed(layers[:-1]):
+        for tr in sym.net.transitions:
+            after = _fire(marking, tr, index)
+            if after is not None and sym.contains(layer, after):
+                marking = after
+                trace.append(tr.name)
+                break
+        else:
+            raise _Budget("no transition leads to the next layer (internal error)")
+    return trace
+
+
+def _fire(marking: list[int], tr: Any, index: dict[str, int]) -> list[int] | None:
+    after = list(marking)
+    for name, w in tr.inputs:
+        after[index[name]] -= w
+    if any(v < 0 for v in after):
+        return None
+    for name, w in tr.outputs:
+        after[index[name]] += w
+    return after
+
+
+def _max_value(sym: SymbolicNet, states: Bdd, place: int, limits: _Deadline) -> int:
     """Largest value of `place` in `states`, MSB first: keep a bit set when some
     marking allows it."""
     value = 0
     names = sym.enc.xs(place)
     for i, name in enumerate(names):
+        limits.check()
         var = sym.bdd.var(name)
         if (states & var) != sym.bdd.false:
             states &= var
@@ -233,19 +358,23 @@ def explore_symbolic(net: Net, limits: SymbolicLimits | None = None) -> Symbolic
     """Reachable markings of `net` as a BDD, then the StateSpace answers from it.
 
     Widening on overflow restarts the fixpoint with the overflowing counters one bit
-    wider; past `limits.max_bits` the run ends inconclusive ("may be unbounded").
+    wider; past `limits.max_bits` the run ends inconclusive ("may be unbounded"). Every
+    limit (time, the command's budget, nodes, memory) ends the run with `complete`
+    False and the reason, never an exception; the passes after a stopped fixpoint get a
+    short grace (`GRACE_SECONDS`) to count what was found, else report 0 states.
     """
-    from analysis.symbolic import measures
-
     limits = limits or SymbolicLimits()
     start = time.monotonic()
     bits = initial_bits(net)
     conserved_bits = _conserved_bits(net)
+    deadline = _Deadline(limits, start)
     while True:
-        sym = SymbolicNet(net, bits, limits)
         try:
-            reached, sweeps, peak, reason = _fixpoint(sym, limits, start)
+            sym = SymbolicNet(net, bits, limits, deadline)
+            reached, sweeps, peak, reason = _fixpoint(sym, deadline)
             break
+        except _Budget as exc:
+            return _stopped(net, bits, start, f"{exc} (building the transition relations)")
         except _Overflow as over:
             wide = [p for p in over.places if bits[p] + 1 > limits.max_bits]
             if wide:
@@ -259,23 +388,82 @@ def explore_symbolic(net: Net, limits: SymbolicLimits | None = None) -> Symbolic
                 )
             for p in over.places:
                 bits[p] = min(limits.max_bits, max(bits[p] + 1, conserved_bits))
+        except _OUT_OF_MEMORY as exc:
+            return _stopped(net, bits, start, _memory_reason(limits, exc))
+    after = deadline
+    if reason is not None:
+        # counting what was found is worth a little more time, never much
+        grace = replace(limits, time_limit=time.monotonic() - start + GRACE_SECONDS, budget=None)
+        after = _Deadline(grace, start)
+    try:
+        return _answers(sym, reached, after, reason, start, sweeps, peak)
+    except _Budget as exc:
+        result = _stopped(net, list(sym.enc.bits), start, reason or str(exc))
+        result.peak_nodes, result.iterations = peak, sweeps
+        return result
+    except _OUT_OF_MEMORY as exc:
+        return _stopped(net, list(sym.enc.bits), start, _memory_reason(limits, exc))
+
+
+GRACE_SECONDS = 1.0
+
+
+_OUT_OF_MEMORY = (MemoryError, RuntimeError, ValueError)
+"""What dd.cudd raises when CUDD returns no node (its `max_memory` reached): a
+RuntimeError naming memory from most operators, a ValueError about a NULL node from
+`and_exists`. `_memory_reason` re-raises the ones that are not about memory."""
+
+
+def _memory_reason(limits: SymbolicLimits, exc: BaseException) -> str:
+    text = str(exc)
+    if not isinstance(exc, MemoryError) and "memory" not in text and "NULL" not in text:
+        raise exc
+    budget = limits.budget
+    if budget is not None and budget.memory is not None:
+        return memory_limit_reason(budget.memory)
+    first = text.splitlines()[0] if text else type(exc).__name__
+    return f"memory: the decision diagram library could not allocate ({first})"
+
+
+def _answers(
+    sym: SymbolicNet,
+    reached: Bdd,
+    limits: _Deadline,
+    reason: str | None,
+    start: float,
+    sweeps: int,
+    peak: int,
+) -> SymbolicResult:
+    """Count, bounds and deadlock from the reached set; raises `_Budget` on a limit."""
+    from analysis.symbolic import measures
+
+    net = sym.net
     xvars = sym.xvars
-    states = measures.count(reached, xvars)
+    states = measures.count(reached, xvars, limits.check)
     weight = {}
     for p in range(len(net.places)):
         for i, name in enumerate(sym.enc.xs(p)):
             weight[name] = 1 << (sym.enc.bits[p] - 1 - i)
-    bounds = {net.places[p].name: _max_value(sym, reached, p) for p in range(len(net.places))}
+    bounds = {
+        net.places[p].name: _max_value(sym, reached, p, limits) for p in range(len(net.places))
+    }
+    heaviest = max(0, measures.max_weight(reached, xvars, weight, limits.check))
     dead = sym.bdd.true
     for t in sym.transitions:
         dead &= ~t.enabled
     hit = reached & dead
     deadlock: bool | None = hit != sym.bdd.false
     witness = None
+    trace = None
     if deadlock:
         pick = sym.bdd.pick(hit, care_vars=set(xvars))
         marking = decode(sym, pick or {})
         witness = {net.places[p].name: v for p, v in enumerate(marking) if v}
+        if sym.limits.trace:
+            try:
+                trace = deadlock_trace(sym, reached, marking, limits)
+            except _Budget:
+                trace = None  # the witness marking stands without its trace
     elif reason is not None:
         deadlock = None  # none found among the markings reached so far
     return SymbolicResult(
@@ -283,11 +471,11 @@ def explore_symbolic(net: Net, limits: SymbolicLimits | None = None) -> Symbolic
         reason=reason,
         states=states,
         max_tokens_place=max(bounds.values(), default=0),
-        max_tokens_marking=max(0, measures.max_weight(reached, xvars, weight)),
+        max_tokens_marking=heaviest,
         place_bounds=bounds,
         deadlock=deadlock,
         deadlock_marking=witness,
-        deadlock_trace=None,
+        deadlock_trace=trace,
         seconds=time.monotonic() - start,
         peak_nodes=peak,
         iterations=sweeps,

@@ -29,9 +29,12 @@ def _fold(
     leaf_true: int,
     combine: Callable[[int, int, int, int, int], int],
     false_value: int,
+    check: Callable[[], None] | None = None,
 ) -> int:
     """Post-order evaluation of `combine(rank, low_rank, low_value, high_rank,
-    high_value)` at every node without recursion (diagrams can be thousands of levels deep)."""
+    high_value)` at every node without recursion (diagrams can be thousands of levels deep).
+    `check` is called every few thousand nodes: it raises to stop a pass that a budget
+    no longer allows."""
     memo: dict[int, int] = {}
     true = root.bdd.true
     false = root.bdd.false
@@ -50,7 +53,11 @@ def _fold(
         return None
 
     stack = [root]
+    steps = 0
     while stack:
+        steps += 1
+        if check is not None and steps % 4096 == 0:
+            check()
         u = stack[-1]
         if value_of(u) is not None:
             stack.pop()
@@ -70,7 +77,7 @@ def _fold(
     return result[1]
 
 
-def count(states: Bdd, xvars: list[str]) -> int:
+def count(states: Bdd, xvars: list[str], check: Callable[[], None] | None = None) -> int:
     """Number of assignments of `xvars` in `states`, exactly."""
     n = len(xvars)
     rank = {v: i for i, v in enumerate(xvars)}
@@ -80,12 +87,17 @@ def count(states: Bdd, xvars: list[str]) -> int:
     def combine(r: int, lr: int, lv: int, hr: int, hv: int) -> int:
         return (lv << (lr - r - 1)) + (hv << (hr - r - 1))
 
-    memo_root = _fold(states, rank, n, 1, combine, 0)
+    memo_root = _fold(states, rank, n, 1, combine, 0, check)
     top = rank[states.var] if states.var is not None else n
     return memo_root << top
 
 
-def max_weight(states: Bdd, xvars: list[str], weight: dict[str, int]) -> int:
+def max_weight(
+    states: Bdd,
+    xvars: list[str],
+    weight: dict[str, int],
+    check: Callable[[], None] | None = None,
+) -> int:
     """Largest sum of `weight` over the variables set to 1, among assignments in
     `states` (variables skipped by a path are free: set to 1). -1 when empty."""
     n = len(xvars)
@@ -105,6 +117,6 @@ def max_weight(states: Bdd, xvars: list[str], weight: dict[str, int]) -> int:
         high = hv + weight.get(xvars[r], 0) + free(r + 1, hr) if hv > neg else neg
         return max(low, high)
 
-    best = _fold(states, rank, n, 0, combine, neg)
+    best = _fold(states, rank, n, 0, combine, neg, check)
     top = rank[states.var] if states.var is not None else n
     return best + free(0, top)

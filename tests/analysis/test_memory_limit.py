@@ -63,6 +63,7 @@ def test_a_search_past_the_memory_limit_stops_honestly_not_with_a_crash(tmp_path
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     command = [sys.executable, "-m", "analysis.cli", "verify", str(model), "--format", "json"]
     limits = ["--memory-limit", "200M", "--max-states", "100000000", "--time-limit", "60"]
+    limits += ["--method", "explicit"]  # its subject: the explicit search's stop
     done = subprocess.run(
         [*command, *limits], capture_output=True, text=True, env=env, timeout=120, check=False
     )

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import pytest
 import yaml
 
+from analysis.budget import Budget, resident_bytes
 from analysis.symbolic import SymbolicLimits, choose_method, explore_symbolic
+from analysis.symbolic.explore import GRACE_SECONDS as GRACE
 from coral_lang.net import Net, Place, Transition
 from coral_lang.pnml.read import read_pnml
 from tests.conftest import CONFORMANCE
@@ -128,3 +131,64 @@ def test_deadlock_witness_is_dead() -> None:
 def test_choose_method_prefers_symbolic_for_huge_conservative_nets() -> None:
     assert choose_method(_cycles(40)) == "symbolic"
     assert choose_method(_cycles(3)) == "explicit"
+
+
+def _replay(net: Net, trace: list[str]) -> dict[str, int]:
+    marking = {p.name: p.initial for p in net.places}
+    by_name = {t.name: t for t in net.transitions}
+    for name in trace:
+        tr = by_name[name]
+        for place, w in tr.inputs:
+            assert marking[place] >= w, f"{name} is not enabled"
+            marking[place] -= w
+        for place, w in tr.outputs:
+            marking[place] += w
+    return {p: v for p, v in marking.items() if v}
+
+
+@pytest.mark.parametrize("model", ["Philosophers-PT-000005", "Railroad-PT-005", "ERK-PT-000001"])
+def test_deadlock_trace_replays_to_the_witness(model: str) -> None:
+    entry = ORACLE[model]
+    net = read_pnml(CONFORMANCE / entry["pnml"])
+    result = explore_symbolic(net, SymbolicLimits(time_limit=30))
+    if not entry["deadlock"]:
+        assert result.deadlock is False and result.deadlock_trace is None
+        return
+    assert result.deadlock_trace is not None
+    final = _replay(net, result.deadlock_trace)
+    assert final == result.deadlock_marking
+    enabled = [t for t in net.transitions if all(final.get(p, 0) >= w for p, w in t.inputs)]
+    assert not enabled
+
+
+def test_time_limit_bounds_the_whole_run() -> None:
+    """A net far too large for 0.5 s stops within about twice the limit, saying why."""
+    entry = ORACLE["Kanban-PT-00005"]
+    net = read_pnml(CONFORMANCE / entry["pnml"])
+    started = time.monotonic()
+    result = explore_symbolic(net, SymbolicLimits(time_limit=0.5))
+    assert time.monotonic() - started < 1.0 + GRACE
+    assert not result.complete
+    assert result.reason is not None and "time limit" in result.reason
+    assert result.deadlock is None
+
+
+def test_command_budget_stops_the_run() -> None:
+    entry = ORACLE["Kanban-PT-00005"]
+    net = read_pnml(CONFORMANCE / entry["pnml"])
+    started = time.monotonic()
+    result = explore_symbolic(net, SymbolicLimits(budget=Budget(0.5)))
+    assert time.monotonic() - started < 1.0 + GRACE
+    assert not result.complete and result.reason is not None
+    assert "time limit of 0.5 s" in result.reason
+
+
+def test_memory_limit_becomes_a_node_budget() -> None:
+    """A memory limit barely above what the process uses leaves room for few nodes:
+    the run stops inconclusive, naming the memory limit, never crashing."""
+    entry = ORACLE["Kanban-PT-00005"]
+    net = read_pnml(CONFORMANCE / entry["pnml"])
+    budget = Budget(memory=resident_bytes() + 2_000_000)
+    result = explore_symbolic(net, SymbolicLimits(time_limit=20, budget=budget))
+    assert not result.complete
+    assert result.reason is not None and "memory limit" in result.reason
