@@ -14,7 +14,7 @@ places hold tokens (too few). `siphon_trap_check` says which case applies.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from collections.abc import Set as AbstractSet
 from dataclasses import dataclass
 
@@ -78,27 +78,36 @@ def _prune_trap(arcs: _Arcs, trap: set[int], suspects: list[int]) -> None:
     feed a transition putting into p, so only those are looked at again. The cost is
     the arcs around what is dropped, not places x sweeps (a 5,000-place chain took
     minutes of sweeps)."""
-    while suspects:
-        p = suspects.pop()
-        if p not in trap:
-            continue
-        if any(arcs.t_out[t].isdisjoint(trap) for t in arcs.consumers[p]):
-            trap.discard(p)
-            for t in arcs.producers[p]:
-                suspects.extend(arcs.t_in[t] & trap)
+    _largest_inside(trap, suspects, arcs.consumers, arcs.t_out, arcs.producers, arcs.t_in)
 
 
 def _prune_siphon(arcs: _Arcs, siphon: set[int], suspects: list[int]) -> None:
     """The dual of `_prune_trap`: shrink ``siphon`` in place to the largest siphon
     inside it; dropping p can only break the outputs of transitions taking from p."""
+    _largest_inside(siphon, suspects, arcs.producers, arcs.t_in, arcs.consumers, arcs.t_out)
+
+
+def _largest_inside(
+    kept: set[int],
+    suspects: list[int],
+    guards: Sequence[Iterable[int]],
+    guard_side: Sequence[AbstractSet[int]],
+    feeders: Sequence[Iterable[int]],
+    feeder_side: Sequence[AbstractSet[int]],
+) -> None:
+    """The worklist both prunings share: a place p stays while every transition of
+    ``guards[p]`` has a place of ``guard_side[t]`` kept; dropping it puts the kept
+    places of ``feeder_side[t]``, for each ``t`` of ``feeders[p]``, back on the list.
+    For traps the guards are p's consumers and their outputs; for siphons, p's
+    producers and their inputs."""
     while suspects:
         p = suspects.pop()
-        if p not in siphon:
+        if p not in kept:
             continue
-        if any(arcs.t_in[t].isdisjoint(siphon) for t in arcs.producers[p]):
-            siphon.discard(p)
-            for t in arcs.consumers[p]:
-                suspects.extend(arcs.t_out[t] & siphon)
+        if any(guard_side[t].isdisjoint(kept) for t in guards[p]):
+            kept.discard(p)
+            for t in feeders[p]:
+                suspects.extend(feeder_side[t] & kept)
 
 
 def maximal_trap(net: Net, places: Iterable[str]) -> frozenset[str]:

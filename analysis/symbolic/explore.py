@@ -181,6 +181,30 @@ class SymbolicNet:
             result = (var & result) if bit else (var | result)
         return result
 
+    def shifted(self, place: int, delta: int) -> Bdd:
+        """``y == x + delta`` for the place's counter, with neither overflow nor
+        underflow: a ripple-carry adder (or borrow subtractor) of the constant over
+        the bits, least significant first, so its cost is the counter's width, not
+        the values it can hold (a 16-bit counter has 65,536)."""
+        bdd = self.bdd
+        xs, ys = self.enc.xs(place), self.enc.ys(place)
+        k = len(xs)
+        amount = abs(delta)
+        if amount > (1 << k) - 1:
+            return bdd.false
+        result = bdd.true
+        carry = bdd.false  # carry (adding) or borrow (subtracting) into this bit
+        for i in reversed(range(k)):  # names are most significant first
+            x, y = bdd.var(xs[i]), bdd.var(ys[i])
+            c = bool((amount >> (k - 1 - i)) & 1)
+            total = bdd.apply("<=>", x, carry) if c else bdd.apply("xor", x, carry)
+            result &= bdd.apply("<=>", y, total)
+            if delta > 0:
+                carry = (x | carry) if c else (x & carry)
+            else:
+                carry = (~x | carry) if c else (~x & carry)
+        return result & ~carry
+
     def marking_cube(self, marking: list[int], *, current: bool) -> Bdd:
         cube = self.bdd.true
         for p, v in enumerate(marking):
@@ -205,11 +229,7 @@ class SymbolicNet:
                 continue
             changed.append(p)
             cap = self.enc.capacity(p)
-            update = bdd.false
-            for v in range(w_in, cap + 1):
-                if v + delta <= cap:
-                    update |= self.value(p, v) & self.value(p, v + delta, current=False)
-            relation &= update
+            relation &= self.shifted(p, delta)
             overflow[p] = bdd.false  # filled in below, once the guard is complete
             if delta > 0:
                 overflow[p] = self.at_least(p, max(w_in, cap - delta + 1))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from coral_lang.net import FinalMarking, Net, Place, Transition
 
 Arcs = dict[str, int]
@@ -37,3 +39,19 @@ def mutex() -> Net:
             "exit2": ({"cs2": 1}, {"idle2": 1, "lock": 1}),
         },
     )
+
+
+def replay(net: Net, trace: Sequence[int]) -> tuple[int, ...]:
+    """The marking a trace of transition numbers leads to, asserting every step is
+    enabled where it fires."""
+    marking = net.initial_marking()
+    for t in trace:
+        assert net.enabled(marking, net.transitions[t])
+        marking = net.fire(marking, net.transitions[t])
+    return marking
+
+
+def replay_names(net: Net, names: Sequence[str]) -> dict[str, int]:
+    """`replay` for a trace of transition names; the marked places of the end."""
+    marking = replay(net, [net.transition_index(name) for name in names])
+    return {p.name: v for p, v in zip(net.places, marking, strict=True) if v}

@@ -25,6 +25,7 @@ from analysis.graph import to_networkx
 from analysis.progress import ProgressInfo, ProgressPrinter
 from analysis.statespace import StateSpace, explore
 from coral_lang.net import Net, Place, Transition
+from tests.analysis.nets import replay
 from tests.analysis.reference import ReferenceResult, explore_reference
 from tests.analysis.strategies import small_nets
 
@@ -41,14 +42,6 @@ def _pump(weight: int = 1, counter: int | None = None) -> Net:
     return Net("pump", tuple(places), (Transition("t", inputs, (("a", 1), ("b", weight))),))
 
 
-def _replay(net: Net, trace: list[int]) -> tuple[int, ...]:
-    marking = net.initial_marking()
-    for t in trace:
-        assert net.enabled(marking, net.transitions[t])
-        marking = net.fire(marking, net.transitions[t])
-    return marking
-
-
 def _agree(space: StateSpace, ref: ReferenceResult, net: Net) -> None:
     markings = [tuple(row) for row in space.markings.tolist()]
     assert len(set(markings)) == len(markings) == space.states
@@ -59,7 +52,7 @@ def _agree(space: StateSpace, ref: ReferenceResult, net: Net) -> None:
     assert dead == set(ref.dead)
     for index in space.deadlocks.tolist():
         trace = space.trace_to(index)
-        assert _replay(net, trace) == space.marking(index)
+        assert replay(net, trace) == space.marking(index)
         assert len(trace) == len(ref.trace_to(space.marking(index)))
     columns = np.array(ref.states, dtype=np.int64).reshape(len(ref.states), -1)
     assert space.place_bounds.tolist() == columns.max(axis=0).tolist()
@@ -115,7 +108,7 @@ def test_find_returns_a_shallowest_witness(net: Net, data: st.DataObject) -> Non
     assert hit is not None
     assert space.marking(hit)[place] >= level
     trace = space.trace_to(hit)
-    assert _replay(net, trace) == space.marking(hit)
+    assert replay(net, trace) == space.marking(hit)
     assert len(trace) == min(len(ref.trace_to(m)) for m in witnesses)
 
 
@@ -216,7 +209,7 @@ def test_a_memory_budget_stops_the_search_before_it_is_passed() -> None:
     # within one step of the limit (glibc keeps what the steps freed: this is the peak)
     assert resident_bytes() <= limit + (8 << 20)
     last = space.states - 1
-    assert _replay(net, space.trace_to(last)) == space.marking(last)
+    assert replay(net, space.trace_to(last)) == space.marking(last)
 
 
 def test_time_limit_is_respected_on_the_real_clock() -> None:

@@ -11,6 +11,7 @@ from analysis.encoding import MAX_LOAD, KeyStore
 from analysis.encoding.keystore import GROWTH
 from analysis.statespace import explore
 from coral_lang.net import Net
+from tests.analysis.nets import replay
 from tests.analysis.strategies import small_nets
 
 
@@ -43,19 +44,11 @@ def test_rekey_to_wider_keys_keeps_every_number() -> None:
     assert store.find(np.array([[1, 2]], dtype=np.uint64)).tolist() == [-1]
 
 
-def _replay(net: Net, trace: list[int]) -> tuple[int, ...]:
-    marking = net.initial_marking()
-    for t in trace:
-        assert net.enabled(marking, net.transitions[t])
-        marking = net.fire(marking, net.transitions[t])
-    return marking
-
-
 @settings(max_examples=4, deadline=None, derandomize=True)
 @given(small_nets(max_initial=3))
 def test_every_state_has_a_shortest_trace_without_parent_numbers(net: Net) -> None:
     space = explore(net, max_states=300)
     for index in range(space.states):
         trace = space.trace_to(index)
-        assert _replay(net, trace) == space.marking(index)
+        assert replay(net, trace) == space.marking(index)
         assert len(trace) == space.depth_of(index)

@@ -13,6 +13,7 @@ from analysis.symbolic import SymbolicLimits, choose_method, explore_symbolic
 from analysis.symbolic.explore import GRACE_SECONDS as GRACE
 from coral_lang.net import Net, Place, Transition
 from coral_lang.pnml.read import read_pnml
+from tests.analysis.nets import replay_names
 from tests.conftest import CONFORMANCE
 
 # Instances the chained fixpoint finishes in well under a second each on this machine.
@@ -133,19 +134,6 @@ def test_choose_method_prefers_symbolic_for_huge_conservative_nets() -> None:
     assert choose_method(_cycles(3)) == "explicit"
 
 
-def _replay(net: Net, trace: list[str]) -> dict[str, int]:
-    marking = {p.name: p.initial for p in net.places}
-    by_name = {t.name: t for t in net.transitions}
-    for name in trace:
-        tr = by_name[name]
-        for place, w in tr.inputs:
-            assert marking[place] >= w, f"{name} is not enabled"
-            marking[place] -= w
-        for place, w in tr.outputs:
-            marking[place] += w
-    return {p: v for p, v in marking.items() if v}
-
-
 @pytest.mark.parametrize("model", ["Philosophers-PT-000005", "Railroad-PT-005", "ERK-PT-000001"])
 def test_deadlock_trace_replays_to_the_witness(model: str) -> None:
     entry = ORACLE[model]
@@ -155,7 +143,7 @@ def test_deadlock_trace_replays_to_the_witness(model: str) -> None:
         assert result.deadlock is False and result.deadlock_trace is None
         return
     assert result.deadlock_trace is not None
-    final = _replay(net, result.deadlock_trace)
+    final = replay_names(net, result.deadlock_trace)
     assert final == result.deadlock_marking
     enabled = [t for t in net.transitions if all(final.get(p, 0) >= w for p, w in t.inputs)]
     assert not enabled

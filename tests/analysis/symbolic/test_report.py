@@ -17,6 +17,7 @@ from analysis.symbolic.report import SYMBOLIC
 from analysis.verify import VerifyOptions, verify
 from coral_lang.net import Net, Place, Transition
 from coral_lang.pnml.read import read_pnml
+from tests.analysis.nets import replay_names
 from tests.conftest import CONFORMANCE
 
 PHILOSOPHERS = CONFORMANCE / "pnml" / "Philosophers-PT-000005.pnml"
@@ -33,18 +34,6 @@ def _cycles(n: int) -> Net:
     return Net(f"cycles{n}", tuple(places), tuple(trs))
 
 
-def _replay(net: Net, names: list[str]) -> dict[str, int]:
-    marking = {p.name: p.initial for p in net.places}
-    by_name = {t.name: t for t in net.transitions}
-    for name in names:
-        for place, w in by_name[name].inputs:
-            assert marking[place] >= w, f"{name} is not enabled"
-            marking[place] -= w
-        for place, w in by_name[name].outputs:
-            marking[place] += w
-    return {p: v for p, v in marking.items() if v}
-
-
 def test_symbolic_method_gives_figures_and_a_replayable_deadlock() -> None:
     net = read_pnml(PHILOSOPHERS)
     report = verify(net, VerifyOptions(method="symbolic", structural=False))
@@ -55,7 +44,7 @@ def test_symbolic_method_gives_figures_and_a_replayable_deadlock() -> None:
     deadlock = report.property("deadlock")
     assert deadlock.verdict is Verdict.VIOLATED and deadlock.method == SYMBOLIC
     assert deadlock.evidence is not None and deadlock.evidence.trace
-    final = _replay(net, [step.transition for step in deadlock.evidence.trace])
+    final = replay_names(net, [step.transition for step in deadlock.evidence.trace])
     assert final == deadlock.evidence.marking
     assert report.property("bounded").method == SYMBOLIC
 
@@ -107,7 +96,7 @@ def test_query_deadlock_from_the_diagram(capsys: pytest.CaptureFixture[str]) -> 
     answer = session.check_global("ReachabilityDeadlock")
     assert answer.value is True and answer.techniques == ("DECISION_DIAGRAMS",)
     assert answer.trace is not None
-    _replay(net, list(answer.trace))
+    replay_names(net, list(answer.trace))
     code = query_main(
         [
             str(PHILOSOPHERS),
