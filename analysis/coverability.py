@@ -322,6 +322,8 @@ def _summarise(nodes: Sequence[_Node], n_places: int) -> tuple[dict[int, int], l
     a 2,001-place net of 14,582 nodes)."""
     first_omega: dict[int, int] = {}
     top = np.zeros(n_places, dtype=np.int64)
+    if n_places == 0:  # a mission with no places: nothing to summarise
+        return first_omega, top.tolist()
     for start in range(0, len(nodes), SUMMARY_BLOCK):
         block = np.array(
             [node.marking for node in nodes[start : start + SUMMARY_BLOCK]], dtype=np.int64

@@ -150,8 +150,9 @@ def test_deadlock_trace_replays_to_the_witness(model: str) -> None:
 
 
 def test_time_limit_bounds_the_whole_run() -> None:
-    """A net far too large for 0.5 s stops within about twice the limit, saying why."""
-    entry = ORACLE["Kanban-PT-00005"]
+    """A net far too large for 0.5 s stops within about twice the limit, saying why
+    (Peterson-PT-2: plain chaining does not finish it in 5 s)."""
+    entry = ORACLE["Peterson-PT-2"]
     net = read_pnml(CONFORMANCE / entry["pnml"])
     started = time.monotonic()
     result = explore_symbolic(net, SymbolicLimits(time_limit=0.5))
@@ -162,7 +163,7 @@ def test_time_limit_bounds_the_whole_run() -> None:
 
 
 def test_command_budget_stops_the_run() -> None:
-    entry = ORACLE["Kanban-PT-00005"]
+    entry = ORACLE["Peterson-PT-2"]
     net = read_pnml(CONFORMANCE / entry["pnml"])
     started = time.monotonic()
     result = explore_symbolic(net, SymbolicLimits(budget=Budget(0.5)))

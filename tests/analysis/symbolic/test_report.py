@@ -69,7 +69,7 @@ def test_auto_turns_to_diagrams_when_the_explicit_search_stops() -> None:
 
 
 def test_symbolic_verify_stops_within_its_time_limit() -> None:
-    net = read_pnml(CONFORMANCE / "pnml" / "Kanban-PT-00005.pnml")
+    net = read_pnml(CONFORMANCE / "pnml" / "Peterson-PT-2.pnml")
     started = time.monotonic()
     report = verify(
         net, VerifyOptions(method="symbolic", time_limit=1.0, structural=False), budget=Budget()
