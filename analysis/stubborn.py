@@ -41,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from analysis.encoding import CompactNet
+from analysis.encoding.compact import row_entries
 
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
@@ -76,11 +77,7 @@ class _Rows:
     def expand(self, rows: IntArray) -> tuple[IntArray, IntArray]:
         """``(owner, item)`` pairs: every item of each of ``rows``, ``owner`` being its
         position in ``rows``."""
-        counts = self.counts.take(rows)
-        owner = np.repeat(np.arange(rows.size, dtype=np.int64), counts)
-        offsets = np.cumsum(counts) - counts
-        entry = np.arange(owner.size, dtype=np.int64) - offsets.take(owner)
-        entry += self.ptr.take(rows).take(owner)
+        owner, entry = row_entries(self.ptr, self.counts, rows)
         return owner, self.items.take(entry)
 
 
@@ -98,16 +95,13 @@ class StubbornSets:
         self.needs_proviso = visible is not None
         inputs, effects = cn.inputs, cn.effects
         # From the sparse arcs only: a mission can be too large for dense matrices.
-        self.in_ptr = inputs.indptr.astype(np.int64)
-        self.in_places = inputs.places.astype(np.int64)
-        self.in_values = inputs.values.astype(np.int64)
-        self.in_counts = np.diff(self.in_ptr)
+        self.inputs = inputs
         consumers: list[list[int]] = [[] for _ in range(n_p)]
         for t, p in zip(inputs.rows.tolist(), inputs.places.tolist(), strict=True):
             consumers[p].append(t)
         presets = [
-            self.in_places[a:b].tolist()
-            for a, b in zip(self.in_ptr[:-1].tolist(), self.in_ptr[1:].tolist(), strict=True)
+            inputs.places[a:b].tolist()
+            for a, b in zip(inputs.indptr[:-1].tolist(), inputs.indptr[1:].tolist(), strict=True)
         ]
         self.conflicts = _Rows(
             [sorted({u for p in presets[t] for u in consumers[p]}) for t in range(n_t)]
@@ -123,11 +117,9 @@ class StubbornSets:
         self._seed_order = np.lexsort((np.arange(n_t), self.conflicts.counts)).astype(np.int64)
         # Most producers a disabled transition can bring in (its largest scapegoat's).
         self._scapegoat_bound = np.zeros(n_t, dtype=np.int64)
-        if self.in_places.size:
+        if inputs.places.size:
             np.maximum.at(
-                self._scapegoat_bound,
-                inputs.rows.astype(np.int64),
-                self.producers.counts.take(self.in_places),
+                self._scapegoat_bound, inputs.rows, self.producers.counts.take(inputs.places)
             )
         self.visible = np.zeros(0, dtype=np.int64)
         if visible is not None:
@@ -245,13 +237,9 @@ class StubbornSets:
         first insufficient input place. Returns the new pairs and the runs whose
         transition is disabled for no reason the arcs show (never enabled by the
         explorer's bounds): those runs give up."""
-        counts = self.in_counts.take(ts)
-        owner = np.repeat(np.arange(ts.size, dtype=np.int64), counts)
-        offsets = np.cumsum(counts) - counts
-        arc = np.arange(owner.size, dtype=np.int64) - offsets.take(owner)
-        arc += self.in_ptr.take(ts).take(owner)
-        places = self.in_places.take(arc)
-        short = cols[places, column.take(rs.take(owner))] < self.in_values.take(arc)
+        owner, arc = self.inputs.expand(ts)
+        places = self.inputs.places.take(arc)
+        short = cols[places, column.take(rs.take(owner))] < self.inputs.values.take(arc)
         hits = np.flatnonzero(short)
         # `owner` ascends, so the first hit of each owner is its first short arc.
         owners, first = np.unique(owner.take(hits), return_index=True)

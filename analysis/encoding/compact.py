@@ -48,6 +48,18 @@ class PresetGroup:
     weights: IntArray
 
 
+def row_entries(indptr: IntArray, counts: IntArray, rows: IntArray) -> tuple[IntArray, IntArray]:
+    """For compressed rows (row ``i`` is entries ``indptr[i]:indptr[i+1]``, ``counts``
+    their lengths) and a sequence of ``rows``: ``(owner, entry)``, one pair per entry
+    of each row, ``owner`` being the position in ``rows``."""
+    taken = counts.take(rows)
+    owner = np.repeat(np.arange(rows.size, dtype=np.int64), taken)
+    offsets = np.cumsum(taken) - taken
+    entry = np.arange(owner.size, dtype=np.int64) - offsets.take(owner)
+    entry += indptr.take(rows).take(owner)
+    return owner, entry
+
+
 @dataclass(frozen=True)
 class Arcs:
     """One sparse row per transition (compressed rows): ``places[indptr[t]:indptr[t+1]]``
@@ -76,12 +88,7 @@ class Arcs:
     def expand(self, transitions: IntArray) -> tuple[IntArray, IntArray]:
         """For a sequence of transitions: ``(owner, entry)``, one pair per entry of each
         one's row, ``owner`` being the position in ``transitions``."""
-        counts = self.counts.take(transitions)
-        owner = np.repeat(np.arange(transitions.size, dtype=np.int64), counts)
-        offsets = np.cumsum(counts) - counts
-        entry = np.arange(owner.size, dtype=np.int64) - offsets.take(owner)
-        entry += self.indptr.take(transitions).take(owner)
-        return owner, entry
+        return row_entries(self.indptr, self.counts, transitions)
 
     @classmethod
     def of(cls, rows: Sequence[dict[int, int]]) -> Arcs:
