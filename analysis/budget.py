@@ -298,9 +298,15 @@ class Budget:
         would pass the memory limit. The hook a search calls before it grows."""
         if self.memory is None:
             return
-        if self.memory_spent or resident_bytes() + extra_bytes > self.memory:
+        if self.memory_spent or not self.would_fit(extra_bytes):
             self.memory_spent = True
             raise BudgetExceeded(memory_limit_reason(self.memory))
+
+    def would_fit(self, extra_bytes: int) -> bool:
+        """Whether ``extra_bytes`` more would keep the process's resident memory within
+        the memory limit (always, without one); `check_memory` without the raise, for a
+        search that has a cheaper way out than stopping."""
+        return self.memory is None or resident_bytes() + extra_bytes <= self.memory
 
     def time_reason(self, done: int | None = None, unit: str | None = None) -> str:
         """Why `expired` said so: `time_limit_reason` for this budget's limit, or

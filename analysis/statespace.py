@@ -60,7 +60,6 @@ from analysis.budget import (
     Budget,
     BudgetExceeded,
     memory_limit_reason,
-    resident_bytes,
     work_limit_reason,
 )
 from analysis.encoding import (
@@ -1415,11 +1414,9 @@ class _Explorer:
     def fits(self, extra_bytes: int, grown_bytes: int) -> bool:
         """Whether the allocations `guard` is told about keep the process within its
         memory limit."""
-        limit = self.budget.memory
-        if limit is None:
+        if self.budget.memory is None:
             return True
-        extra = max(0, extra_bytes - heap_free_bytes()) + grown_bytes
-        return resident_bytes() + extra <= limit
+        return self.budget.would_fit(max(0, extra_bytes - heap_free_bytes()) + grown_bytes)
 
     def insert_bytes(self, candidates: int) -> tuple[int, int]:
         """Bytes that storing up to ``candidates`` successors may allocate: the
