@@ -73,25 +73,21 @@ class DeadlockAnswer:
 
 
 def replay(net: Net, trace: Sequence[str]) -> list[int] | None:
-    """The marking ``trace`` reaches in ``net``, or None if some step is not enabled."""
-    marking = [p.initial for p in net.places]
+    """The marking ``trace`` reaches in ``net``, or None if some step is not enabled
+    (the net's own firing rule: `Net.enabled`, `Net.fire`)."""
+    marking = net.initial_marking()
     for name in trace:
         t = net.transition(name)
-        for p, w in t.inputs:
-            i = net.place_index(p)
-            if marking[i] < w:
-                return None
-            marking[i] -= w
-        for p, w in t.outputs:
-            marking[net.place_index(p)] += w
-    return marking
+        if not net.enabled(marking, t):
+            return None
+        marking = net.fire(marking, t)
+    return list(marking)
 
 
 def is_dead(net: Net, marking: Sequence[int]) -> bool:
     """Whether ``marking`` enables no transition of ``net``."""
-    return not any(
-        all(marking[net.place_index(p)] >= w for p, w in t.inputs) for t in net.transitions
-    )
+    reached = tuple(marking)
+    return not any(net.enabled(reached, t) for t in net.transitions)
 
 
 def decide_deadlock(
