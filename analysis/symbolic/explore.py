@@ -320,30 +320,21 @@ def deadlock_trace(sym: SymbolicNet, reached: Bdd, dead: list[int], limits: _Dea
             raise _Budget("the dead marking is not reachable backwards (internal error)")
         seen |= layer
         layers.append(layer)
-    index = {p.name: i for i, p in enumerate(sym.net.places)}
-    marking = [p.initial for p in sym.net.places]
+    net = sym.net
+    marking = net.initial_marking()
     trace: list[str] = []
     for layer in reversed(layers[:-1]):
-        for tr in sym.net.transitions:
-            after = _fire(marking, tr, index)
-            if after is not None and sym.contains(layer, after):
+        for tr in net.transitions:
+            if not net.enabled(marking, tr):
+                continue
+            after = net.fire(marking, tr)
+            if sym.contains(layer, list(after)):
                 marking = after
                 trace.append(tr.name)
                 break
         else:
             raise _Budget("no transition leads to the next layer (internal error)")
     return trace
-
-
-def _fire(marking: list[int], tr: Any, index: dict[str, int]) -> list[int] | None:
-    after = list(marking)
-    for name, w in tr.inputs:
-        after[index[name]] -= w
-    if any(v < 0 for v in after):
-        return None
-    for name, w in tr.outputs:
-        after[index[name]] += w
-    return after
 
 
 def _max_value(sym: SymbolicNet, states: Bdd, place: int, limits: _Deadline) -> int:
