@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from typing import Literal
 
-from coral_lang.net import Net, TransitionKind
+from analysis.symbolic.report import symbolic_applicable
+from coral_lang.net import Net
 
 Method = Literal["explicit", "symbolic"]
 
@@ -36,9 +37,7 @@ def choose_method(net: Net, *, explicit_budget: int = EXPLICIT_BUDGET_STATES) ->
     search can store; explicit otherwise (it gives shortest traces and every
     examination). `--method auto` keeps explicit today; this is the rule to switch to.
     """
-    if any(tr.kind is TransitionKind.INPUT for tr in net.transitions):
-        return "explicit"
-    if any(p.capacity is not None for p in net.places):
+    if not symbolic_applicable(net):
         return "explicit"
     estimate = state_estimate(net)
     if estimate != float("inf") and estimate > explicit_budget:
