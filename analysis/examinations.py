@@ -48,7 +48,7 @@ from analysis.ctl import CtlChecker, CtlError, NetIndex, StateEvaluator, marking
 from analysis.mccxml import MccProperty, PlaceBound
 from analysis.stategraph import GraphError, StateGraph, build_graph, scc_labels
 from analysis.statespace import STOPPED_BY_REQUEST, StateSpace, explore
-from analysis.symbolic.report import symbolic_applicable
+from analysis.symbolic.report import AUTO_SYMBOLIC_MIN_STATES, symbolic_applicable
 from coral_lang.formula import (
     All,
     Exists,
@@ -99,9 +99,6 @@ EXPLICIT = ("EXPLICIT", "STATE_COMPRESSION")
 REDUCED = ("STRUCTURAL_REDUCTION", *EXPLICIT)
 """Techniques of an answer read on the structurally reduced net (`analysis.reduce`)."""
 SYMBOLIC = ("DECISION_DIAGRAMS",)
-AUTO_SYMBOLIC_MIN_STATES = 100_000
-"""``method="auto"`` builds a decision diagram only when the explicit searches had at
-least this state budget: a smaller one asks for a small explicit search (as in verify)."""
 
 STATE_EQUATION_SECONDS = 60.0
 """Most seconds the z3 proof of deadlock freedom may take when a search gave up."""

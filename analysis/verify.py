@@ -46,6 +46,7 @@ from analysis.report import (
 from analysis.stategraph import GraphError, StateGraph, build_graph
 from analysis.statespace import StateSpace, explore
 from analysis.symbolic.report import (
+    AUTO_SYMBOLIC_MIN_STATES,
     SYMBOLIC,
     symbolic_applicable,
     symbolic_deadlock,
@@ -91,9 +92,6 @@ UNBOUNDED_SECONDS = 3.0
 EXPLICIT_POR = "explicit state space (stubborn-set reduced)"
 REDUCED = "structural reductions + explicit state space of the reduced net"
 AUTO_SYMBOLIC_SHARE = 0.5  # of the time left, for decision diagrams after an explicit stop
-AUTO_SYMBOLIC_MIN_STATES = 100_000
-"""`--method auto` tries decision diagrams after an incomplete explicit search only when
-its state budget was at least this: a smaller one asks for a small explicit search."""
 TIMED = "timed analysis (zones)"
 UNTIMED_WITHIN = "decided by timed analysis: run coral-check verify --timed"
 NO_PROFILE = "no vehicle profile: timed analysis needs the mission's profile"

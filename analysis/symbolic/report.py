@@ -14,6 +14,11 @@ if TYPE_CHECKING:
 
 SYMBOLIC = "symbolic state space (decision diagram)"
 
+AUTO_SYMBOLIC_MIN_STATES = 100_000
+"""`--method auto` (verify and query) tries decision diagrams after an incomplete
+explicit search only when its state budget was at least this: a smaller one asks for
+a small explicit search."""
+
 
 def symbolic_applicable(net: Net) -> bool:
     """Whether the diagrams model `net` exactly: plain P/T firing only (mission INPUT
