@@ -152,6 +152,15 @@ class _Tree:
         self.net = net
         self.inputs = [[(net.place_index(p), w) for p, w in t.inputs] for t in net.transitions]
         self.outputs = [[(net.place_index(p), w) for p, w in t.outputs] for t in net.transitions]
+        # Only a transition whose input places are all marked can fire: a node looks at
+        # the consumers of its marked places (and the transitions without inputs), so a
+        # node costs what it marks, not the width of the net.
+        consumers: list[set[int]] = [set() for _ in net.places]
+        for t, arcs in enumerate(self.inputs):
+            for p, _ in arcs:
+                consumers[p].add(t)
+        self.consumers = [sorted(c) for c in consumers]
+        self.sources = [t for t, arcs in enumerate(self.inputs) if not arcs]
         start = net.initial_marking()
         self.nodes = [_Node(start, -1, -1)]
         # node markings, ω as _BIG; none when M0 itself is too large (build stops at once)
@@ -172,7 +181,7 @@ class _Tree:
             marking = self.nodes[index].marking
             chain: list[int] | None = None
             ancestors = np.zeros((0, len(marking)), dtype=np.int64)
-            for t in range(len(self.inputs)):
+            for t in self._candidates(index):
                 if not all(marking[p] == OMEGA or marking[p] >= w for p, w in self.inputs[t]):
                     continue
                 if chain is None:  # shared by all children of this node
@@ -190,6 +199,14 @@ class _Tree:
                 self.rows.append(_numeric([child.marking])[0])
                 queue.append(len(self.nodes) - 1)
         return True, ""
+
+    def _candidates(self, index: int) -> list[int]:
+        """Transitions that may be enabled at node ``index``, in index order (so the
+        tree is the one a scan of every transition builds)."""
+        found = set(self.sources)
+        for p in np.flatnonzero(self.rows[index]).tolist():
+            found.update(self.consumers[p])
+        return sorted(found)
 
     def _too_many(self, values: Sequence[int], places: Iterable[int]) -> str:
         """Why the tree must stop if a finite count among ``places`` of ``values`` is
@@ -290,7 +307,7 @@ def coverability(
     tree = _Tree(net)
     complete, reason = tree.build(max_nodes, budget)
     n_places = len(net.places)
-    first_omega, top = _summarise(tree.nodes, n_places)
+    first_omega, top = _summarise(tree.nodes, n_places, tree.rows)
     unbounded = tuple(net.places[p].name for p in sorted(first_omega))
     pumps: dict[str, PumpingTrace] = {}
     if find_pumps:
@@ -316,19 +333,30 @@ SUMMARY_BLOCK = 512
 """Tree nodes read into one array by `_summarise` (a few MB on wide nets)."""
 
 
-def _summarise(nodes: Sequence[_Node], n_places: int) -> tuple[dict[int, int], list[int]]:
+def _summarise(
+    nodes: Sequence[_Node],
+    n_places: int,
+    rows: Sequence[npt.NDArray[np.int64]] = (),
+) -> tuple[dict[int, int], list[int]]:
     """Per place, the first node where it is omega and the largest finite count: block
     by block in numpy (a Python loop over nodes x places took 10 s of a 10 s budget on
-    a 2,001-place net of 14,582 nodes)."""
+    a 2,001-place net of 14,582 nodes). ``rows``, the tree's numeric rows (one per node,
+    ω as `_BIG`), spare turning every marking tuple into numbers again: on wide nets that
+    was a third of a second after the tree's time was up."""
     first_omega: dict[int, int] = {}
     top = np.zeros(n_places, dtype=np.int64)
     if n_places == 0:  # a mission with no places: nothing to summarise
         return first_omega, top.tolist()
+    numeric = len(rows) == len(nodes)
     for start in range(0, len(nodes), SUMMARY_BLOCK):
-        block = np.array(
-            [node.marking for node in nodes[start : start + SUMMARY_BLOCK]], dtype=np.int64
-        ).reshape(-1, n_places)
-        omega = block == OMEGA
+        if numeric:
+            block = np.stack(rows[start : start + SUMMARY_BLOCK])
+            omega = block >= _BIG
+        else:
+            block = np.array(
+                [node.marking for node in nodes[start : start + SUMMARY_BLOCK]], dtype=np.int64
+            ).reshape(-1, n_places)
+            omega = block == OMEGA
         top = np.maximum(top, np.where(omega, 0, block).max(axis=0, initial=0))
         seen = omega.any(axis=0)
         for p in np.flatnonzero(seen).tolist():

@@ -222,7 +222,7 @@ def test_the_tree_summary_matches_a_plain_loop() -> None:
     finite count per place that a loop over every node and place gives."""
     import random
 
-    from analysis.coverability import OMEGA, SUMMARY_BLOCK, _Node, _summarise
+    from analysis.coverability import OMEGA, SUMMARY_BLOCK, _Node, _numeric, _summarise
 
     rng = random.Random(7)
     n_places = 6
@@ -246,3 +246,28 @@ def test_the_tree_summary_matches_a_plain_loop() -> None:
             else:
                 top[p] = max(top[p], v)
     assert _summarise(nodes, n_places) == (first, top)
+    rows = [_numeric([node.marking])[0] for node in nodes]
+    assert _summarise(nodes, n_places, rows) == (first, top)  # the tree's own rows
+
+
+@given(small_nets())
+@settings(max_examples=150, deadline=None)
+def test_a_node_looks_only_at_the_consumers_of_its_marked_places(net: Net) -> None:
+    """The tree built from each node's candidates (consumers of its marked places and
+    transitions without inputs) is the tree a scan of every transition builds: the
+    same nodes, in the same order."""
+    from analysis.coverability import _Tree
+
+    fast = _Tree(net)
+    fast_done = fast.build(400, Budget(seconds=30.0))
+
+    class _Scan(_Tree):
+        def _candidates(self, index: int) -> list[int]:
+            return list(range(len(self.inputs)))
+
+    scan = _Scan(net)
+    assert scan.build(400, Budget(seconds=30.0)) == fast_done
+    assert [n.marking for n in fast.nodes] == [n.marking for n in scan.nodes]
+    assert [(n.parent, n.transition) for n in fast.nodes] == [
+        (n.parent, n.transition) for n in scan.nodes
+    ]
