@@ -70,10 +70,14 @@ class Reduction:
     applied: dict[str, int] = field(default_factory=dict)
     """How many times each rule applied."""
     seconds: float = 0.0
+    prefix: tuple[str, ...] = ()
+    """Original transitions fired before any reduced one: the reduced net's initial
+    marking is the one they reach (a rule may fire a transition eagerly at the start,
+    see `fusion`)."""
 
     def expand_trace(self, trace: Sequence[str]) -> list[str]:
         """A firing sequence of the reduced net as one of the original net."""
-        return [name for t in trace for name in self.expansion[t]]
+        return [*self.prefix, *(name for t in trace for name in self.expansion[t])]
 
     def summary(self) -> str:
         """One line: sizes before and after, and the rules used."""
@@ -135,6 +139,7 @@ def reduce_net(
             changed = rule(w) or changed
         if not changed or _expired(budget):
             break
+    seconds = time.monotonic() - start
     return Reduction(
-        net, w.to_net(), goal, dict(w.expand), dict(w.applied), time.monotonic() - start
+        net, w.to_net(), goal, dict(w.expand), dict(w.applied), seconds, tuple(w.prefix)
     )

@@ -25,7 +25,8 @@ from tests.analysis.strategies import small_nets
 def shaped_nets(draw: st.DrawFn) -> Net:
     """A random net plus the shapes of the rules: a fresh place ``q`` that some
     transitions produce into (multiples of ``w``) and one to three transitions consume
-    alone (``pre = {q: w}``), copies of transitions, and self-loops."""
+    alone (``pre = {q: w}``), copies of transitions, a place ``r`` with initial tokens
+    that only ``mv`` consumes (places in series), and self-loops."""
     net = draw(small_nets(max_places=4, max_transitions=4))
     names = [p.name for p in net.places]
     weight = draw(st.integers(1, 2))
@@ -35,19 +36,30 @@ def shaped_nets(draw: st.DrawFn) -> Net:
     for t in net.transitions:
         k = draw(st.integers(1, 2 if n_consumers == 1 else 1))
         outputs = (*t.outputs, ("q", k * weight)) if t in producers else t.outputs
-        transitions.append(Transition(t.name, inputs=t.inputs, outputs=outputs))
+        # Mostly no source transitions: one makes every net deadlock-free at once.
+        inputs = t.inputs or (
+            ((draw(st.sampled_from(names)), 1),) if draw(st.integers(0, 4)) else ()
+        )
+        transitions.append(Transition(t.name, inputs=inputs, outputs=outputs))
         if draw(st.booleans()):
-            transitions.append(Transition(f"{t.name}_copy", inputs=t.inputs, outputs=outputs))
+            transitions.append(Transition(f"{t.name}_copy", inputs=inputs, outputs=outputs))
     for i in range(n_consumers):
         out = draw(st.dictionaries(st.sampled_from(names), st.integers(1, 2), max_size=2))
         transitions.append(
             Transition(f"f{i}", inputs=(("q", weight),), outputs=tuple(sorted(out.items())))
         )
+    # Places in series with initial tokens: r -> mv -> an existing place.
+    feeders = set(draw(st.lists(st.sampled_from(transitions), max_size=2)))
+    transitions = [
+        Transition(t.name, t.inputs, (*t.outputs, ("r", 1))) if t in feeders else t
+        for t in transitions
+    ]
+    transitions.append(Transition("mv", (("r", 1),), ((draw(st.sampled_from(names)), 1),)))
     for i in range(draw(st.integers(0, 2))):
         loop = draw(st.dictionaries(st.sampled_from(names), st.integers(1, 2), max_size=2))
         arcs = tuple(sorted(loop.items()))
         transitions.append(Transition(f"loop{i}", inputs=arcs, outputs=arcs))
-    places = (*net.places, Place("q"))
+    places = (*net.places, Place("q"), Place("r", draw(st.integers(0, 2))))
     return Net(name="shaped", places=places, transitions=tuple(transitions))
 
 
@@ -167,5 +179,40 @@ def test_a_source_transition_collapses_the_net_for_deadlock_only() -> None:
     assert collapse_live(w)
     assert list(w.pre) == ["gen"] and w.post["gen"] == {} and not w.initial
     assert not collapse_live(_work(net, Goal.bounds(["b"])))
+    answer = decide_deadlock(net)
+    assert answer.deadlock is False and answer.states == 1
+
+
+def test_places_in_series_with_initial_tokens_start_the_witness_with_the_prefix() -> None:
+    net = Net(
+        name="prefix",
+        places=(Place("r", 2), Place("s"), Place("lock", 1)),
+        transitions=(
+            _t("mv", {"r": 1}, {"s": 1}),
+            _t("use", {"s": 1, "lock": 1}, {}),
+        ),
+    )
+    red = reduce_net(net, Goal.deadlock())
+    assert red.prefix == ("mv", "mv")
+    answer = decide_deadlock(net)
+    assert answer.deadlock is True and answer.trace is not None
+    assert answer.trace[:2] == ["mv", "mv"]
+    reached = replay(net, answer.trace)
+    assert reached is not None and is_dead(net, reached)
+
+
+def test_a_marked_two_cycle_with_a_reader_is_deadlock_free_without_a_search() -> None:
+    """The SatelliteMemory shape: ``a`` and ``b`` pass one token around, ``read`` only
+    tests ``b``. Fusing ``a`` into ``b`` (its token first) leaves a self-loop on a place
+    that never loses its token: always enabled."""
+    net = Net(
+        name="cycle",
+        places=(Place("a", 1), Place("b"), Place("c", 3)),
+        transitions=(
+            _t("ab", {"a": 1}, {"b": 1}),
+            _t("ba", {"b": 1}, {"a": 1}),
+            _t("read", {"b": 1, "c": 1}, {"b": 1}),
+        ),
+    )
     answer = decide_deadlock(net)
     assert answer.deadlock is False and answer.states == 1
