@@ -1,8 +1,9 @@
 """The deadlock question answered on the reduced net, with the witness mapped back.
 
 Random walks on the reduced net try first (`walk`: a few hundred steps, often enough
-when the net blocks quickly); otherwise the reduced net is explored
-(`analysis.statespace.explore`). A dead marking found either way yields a firing
+when the net blocks quickly), then the siphon-trap property (`siphon_trap`: a cheap
+proof that no dead marking is reachable, when the enumeration is small); otherwise the
+reduced net is explored (`analysis.statespace.explore`). A dead marking found either way yields a firing
 sequence that is expanded (`Reduction.expand_trace`) and replayed on the original net
 before it is trusted, so a witness is always checked on the net the user gave.
 """
@@ -18,6 +19,7 @@ import numpy.typing as npt
 from analysis.budget import Budget
 from analysis.reduce.driver import Reduction, reduce_net, reducible
 from analysis.reduce.goal import Goal, Kind
+from analysis.reduce.siphon_trap import siphons_prove_deadlock_free
 from analysis.reduce.walk import walk_to_deadlock
 from analysis.statespace import explore
 from coral_lang.net import Net
@@ -25,6 +27,12 @@ from coral_lang.net import Net
 WITNESS_FAILED = "the reduced net's deadlock witness does not replay on the original net"
 """``stopped_reason`` when a mapped-back witness fails its replay (a reduction bug: the
 caller falls back to the unreduced search rather than trust the verdict)."""
+
+SIPHON_PROOF = (
+    "siphon-trap property of the reduced net: every minimal siphon of the ordinary net "
+    "contains an initially marked trap"
+)
+"""`DeadlockAnswer.proof` when `siphons_prove_deadlock_free` decided."""
 
 EARLY_STOP_TRANSITIONS = 2000
 """Nets with at most this many transitions stop at the first dead marking stored; the
@@ -73,6 +81,8 @@ class DeadlockAnswer:
     """Markings stored while exploring the reduced net (0 when a random walk found the
     dead marking and no search ran)."""
     stopped_reason: str | None = None
+    proof: str | None = None
+    """When ``deadlock`` is False without a search (``states`` 0): what proved it."""
 
 
 def replay(net: Net, trace: Sequence[str]) -> list[int] | None:
@@ -121,6 +131,8 @@ def decide_deadlock(
         reached = replay(net, trace)
         if reached is not None and is_dead(net, reached):
             return DeadlockAnswer(True, trace, red, 0)
+    if reducible(net) and siphons_prove_deadlock_free(red.net, budget):
+        return DeadlockAnswer(False, None, red, 0, proof=SIPHON_PROOF)
     early = reducible(net) and len(red.net.transitions) <= EARLY_STOP_TRANSITIONS
     first_dead = _FirstDead(red.net) if early else None
     space = explore(red.net, max_states=max_states, budget=budget, stop_when=first_dead)
