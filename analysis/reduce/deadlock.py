@@ -3,9 +3,10 @@
 Random walks on the reduced net try first (`walk`: a few hundred steps, often enough
 when the net blocks quickly), then the siphon-trap property (`siphon_trap`: a cheap
 proof that no dead marking is reachable, when the enumeration is small); otherwise the
-reduced net is explored (`analysis.statespace.explore`). A dead marking found either way yields a firing
-sequence that is expanded (`Reduction.expand_trace`) and replayed on the original net
-before it is trusted, so a witness is always checked on the net the user gave.
+reduced net is explored (`analysis.statespace.explore`). A dead marking found either way
+yields a firing sequence that is expanded (`Reduction.expand_trace`) and replayed on the
+original net before it is trusted, so a witness is always checked on the net the user
+gave.
 """
 
 from __future__ import annotations

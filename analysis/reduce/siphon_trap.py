@@ -7,10 +7,11 @@ marked. So if every minimal siphon contains an initially marked trap, no reachab
 marking is dead. On the reduced net this decides the original: the reduction preserves
 whether a dead marking is reachable.
 
-The enumeration of minimal siphons can be exponential, so it is tried with a small
-work cap: it decides the nets where it is cheap (Dekker's mutual exclusion: 20 minimal
-siphons, a few milliseconds, where the search stores thousands of markings) and costs
-the others a few milliseconds before their search.
+The enumeration of minimal siphons can be exponential, so it is tried with a small work
+cap (larger on wide nets, whose searches are long anyway): it decides the nets where it
+is cheap (Dekker's mutual exclusion: 20 minimal siphons, a few milliseconds, where the
+search stores thousands of markings) and costs the others a few milliseconds before
+their search.
 """
 
 from __future__ import annotations
@@ -20,9 +21,13 @@ from analysis.siphons import maximal_trap, minimal_siphons
 from coral_lang.net import Net
 
 SIPHON_BRANCHES = 100
-"""Partial sets the siphon enumeration may visit (its work cap)."""
+"""Partial sets the siphon enumeration may visit (its work cap)..."""
 SIPHON_SECONDS = 0.05
-"""Its time cap, whatever the branches."""
+"""...and its time cap."""
+WIDE = 400
+"""Reduced nets with at least this many transitions get ten times both caps: their
+searches are long anyway (Dekker-PT-020, 440 transitions, needs about 300 partial sets
+and has 1.2e9 edges)."""
 
 
 def siphons_prove_deadlock_free(net: Net, budget: Budget | None = None) -> bool:
@@ -32,9 +37,10 @@ def siphons_prove_deadlock_free(net: Net, budget: Budget | None = None) -> bool:
         w != 1 for t in net.transitions for _, w in (*t.inputs, *t.outputs)
     ):
         return False
+    scale = 10 if len(net.transitions) >= WIDE else 1
     left = None if budget is None else budget.remaining()
-    seconds = SIPHON_SECONDS if left is None else min(SIPHON_SECONDS, left / 4)
-    found = minimal_siphons(net, SIPHON_BRANCHES, Budget(seconds))
+    seconds = scale * SIPHON_SECONDS if left is None else min(scale * SIPHON_SECONDS, left / 4)
+    found = minimal_siphons(net, scale * SIPHON_BRANCHES, Budget(seconds))
     if not found.complete:
         return False
     marked = {p.name for p in net.places if p.initial}
