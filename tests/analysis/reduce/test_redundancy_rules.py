@@ -64,7 +64,7 @@ def shaped_nets(draw: st.DrawFn) -> Net:
 
 
 @given(shaped_nets())
-@settings(max_examples=80)
+@settings(max_examples=60)
 def test_deadlock_verdict_and_witness_survive_the_rules(net: Net) -> None:
     original = _complete(net)
     answer = decide_deadlock(net, max_states=MAX_STATES)
@@ -85,7 +85,7 @@ def shaped_and_observed(draw: st.DrawFn) -> tuple[Net, list[str], list[str]]:
 
 
 @given(shaped_and_observed())
-@settings(max_examples=80)
+@settings(max_examples=60)
 def test_reachable_observations_and_bounds_are_the_same(
     case: tuple[Net, list[str], list[str]],
 ) -> None:

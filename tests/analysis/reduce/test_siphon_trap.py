@@ -11,7 +11,7 @@ from tests.analysis.strategies import small_nets
 
 
 @given(small_nets(max_places=5, max_transitions=6, max_weight=1))
-@settings(max_examples=100)
+@settings(max_examples=60)
 def test_a_proof_means_no_reachable_dead_marking(net: Net) -> None:
     if not siphons_prove_deadlock_free(net):
         return
