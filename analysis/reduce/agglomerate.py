@@ -146,3 +146,73 @@ def post_agglomerate(w: WorkNet) -> bool:
         w.applied["post-agglomeration"] += 1
         changed = True
     return changed
+
+
+def _pre_agglomerable(w: WorkNet, h: str) -> str | None:
+    """The place ``p`` through which ``h`` passes the conditions of `pre_agglomerate`."""
+    post = w.post[h]
+    if len(post) != 1 or not w.pre[h] or h in w.protected_transitions:
+        return None
+    ((p, a),) = tuple(post.items())
+    if w.initial[p] or w.producers[p] != {h} or p in w.protected_places:
+        return None
+    consumers = w.consumers[p]
+    if not consumers or h in consumers or w.protected_transitions & consumers:
+        return None
+    if any(w.pre[f][p] != a for f in consumers):
+        return None
+    for q in w.pre[h]:
+        if w.consumers[q] != {h} or q in w.protected_places:
+            return None
+    return p
+
+
+def pre_agglomerate(w: WorkNet) -> bool:
+    """Pre-agglomeration of a transition into the consumers of its only output.
+
+    Rule (Berthelot 1986, pre-agglomeration; Haddad & Pradat-Peyre 2006): a transition
+    ``h`` with ``post(h) = {p: a}``, ``p`` initially empty with ``h`` its only producer,
+    ``h`` not consuming ``p``, a non-empty preset whose places only ``h`` consumes, and
+    every consumer ``f`` of ``p`` taking exactly ``a`` from it. Every ``f`` becomes
+    ``h.f`` with ``pre = pre(h) + pre(f) - p`` and ``post = post(f)``; ``h`` and ``p``
+    go. Nothing observed may be touched: ``h``, the consumers, ``p`` and ``pre(h)``.
+
+    Why it preserves deadlock: once enabled ``h`` stays enabled until it fires (nobody
+    else takes its inputs), and its firing only serves the consumers of ``p``. So in any
+    sequence each ``h`` can be postponed to just before the ``f`` using its tokens, and
+    the ``h`` whose tokens nobody used can be left out: a dead marking ``M`` of the
+    original gives the reduced marking with those ``h`` not fired, which is dead (an
+    ``h.f`` there lacks the inputs ``f`` lacked in ``M``). Conversely, at a dead marking of
+    the reduced net the original may still fire ``h``; firing it until it is disabled
+    (its inputs only shrink) gives a dead marking of the original, since every ``f``
+    still lacks its other inputs. The witness is therefore completed: after the expanded
+    trace, ``h`` is fired while enabled (`Reduction.closers`, in `decide_deadlock`).
+
+    Reachability and bounds: with ``p`` and ``pre(h)`` unobserved, a marking with ``h``
+    fired early agrees on every observed place with the one before it, and ``h.f``
+    changes the observed places as ``f`` does.
+    """
+    changed = False
+    for h in list(w.pre):
+        if h not in w.pre:
+            continue
+        p = _pre_agglomerable(w, h)
+        if p is None:
+            continue
+        pre, h_expand = dict(w.pre[h]), w.expand[h]
+        consumers = sorted(w.consumers[p])
+        arcs = {f: (dict(w.pre[f]), dict(w.post[f]), w.expand[f]) for f in consumers}
+        for t in (h, *consumers):
+            w.remove_transition(t)
+        w.remove_place(p)
+        for f, (f_pre, f_post, f_expand) in arcs.items():
+            del f_pre[p]
+            merged = dict(f_pre)
+            for q, n in pre.items():
+                merged[q] = merged.get(q, 0) + n
+            name = f"{h}.{f}" if len(h) + len(f) < 80 else f"agg.{f}"
+            w.add_transition(name, merged, f_post, h_expand + f_expand)
+        w.closers.append(h_expand)
+        w.applied["pre-agglomeration"] += 1
+        changed = True
+    return changed

@@ -98,6 +98,38 @@ def replay(net: Net, trace: Sequence[str]) -> list[int] | None:
     return list(marking)
 
 
+MAX_CLOSING_FIRINGS = 100_000
+"""Closer firings at most when completing a witness (each only drains its private
+inputs, so this is never reached on a net the rule applied to)."""
+
+
+def dead_witness(net: Net, red: Reduction, reduced: Sequence[str]) -> list[str] | None:
+    """The firing sequence of ``net`` for a dead marking the reduced net reaches by
+    ``reduced``: expanded, replayed, then completed by firing the reduction's closers
+    while enabled (last recorded first); None unless it ends in a dead marking of
+    ``net`` (a rule would be wrong: the caller decides nothing)."""
+    trace = red.expand_trace(reduced)
+    reached = replay(net, trace)
+    if reached is None:
+        return None
+    marking = tuple(reached)
+    fired = 0
+    for closer in reversed(red.closers):
+        while fired < MAX_CLOSING_FIRINGS:
+            after = marking
+            for name in closer:
+                t = net.transition(name)
+                if not net.enabled(after, t):
+                    break
+                after = net.fire(after, t)
+            else:
+                marking, fired = after, fired + 1
+                trace.extend(closer)
+                continue
+            break
+    return trace if is_dead(net, marking) else None
+
+
 def is_dead(net: Net, marking: Sequence[int]) -> bool:
     """Whether ``marking`` enables no transition of ``net``."""
     reached = tuple(marking)
@@ -128,9 +160,8 @@ def decide_deadlock(
     red = reduction or reduce_net(net, Goal.deadlock(), budget=budget)
     walked = walk_to_deadlock(red.net) if reducible(net) else None
     if walked is not None:
-        trace = red.expand_trace(walked)
-        reached = replay(net, trace)
-        if reached is not None and is_dead(net, reached):
+        trace = dead_witness(net, red, walked)
+        if trace is not None:
             return DeadlockAnswer(True, trace, red, 0)
     if reducible(net) and siphons_prove_deadlock_free(red.net, budget):
         return DeadlockAnswer(False, None, red, 0, proof=SIPHON_PROOF)
@@ -141,9 +172,8 @@ def decide_deadlock(
     if dead is None and space.deadlocks.size:
         dead = int(space.deadlocks[0])
     if dead is not None:
-        trace = red.expand_trace(space.trace_names(dead))
-        reached = replay(net, trace)
-        if reached is None or not is_dead(net, reached):  # a rule is wrong: say so, decide nothing
+        trace = dead_witness(net, red, space.trace_names(dead))
+        if trace is None:  # a rule is wrong: say so, decide nothing
             return DeadlockAnswer(None, None, red, space.states, WITNESS_FAILED)
         return DeadlockAnswer(True, trace, red, space.states)
     if space.complete:
@@ -183,9 +213,9 @@ def _decide_unaccepted(
         if replayed >= DEAD_REPLAYS:
             reason = f"more than {DEAD_REPLAYS} dead markings to replay"
             return DeadlockAnswer(None, None, red, space.states, reason)
-        trace = red.expand_trace(space.trace_names(int(state)))
-        reached = replay(net, trace)
-        if reached is None or not is_dead(net, reached):
+        trace = dead_witness(net, red, space.trace_names(int(state)))
+        reached = None if trace is None else replay(net, trace)
+        if trace is None or reached is None:
             return DeadlockAnswer(None, None, red, space.states, WITNESS_FAILED)
         if not accepted(reached):
             return DeadlockAnswer(True, trace, red, space.states)

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 from analysis.budget import Budget
 from analysis.inputs import has_inputs
-from analysis.reduce.agglomerate import agglomerate_series, post_agglomerate
+from analysis.reduce.agglomerate import agglomerate_series, post_agglomerate, pre_agglomerate
 from analysis.reduce.dead import (
     remove_dead_transitions,
     remove_neutral_transitions,
@@ -48,6 +48,7 @@ RULES: tuple[Rule, ...] = (
     remove_implicit_places,
     agglomerate_series,
     post_agglomerate,
+    pre_agglomerate,
     fuse_series_places,
 )
 """The rule families in the order one round applies them (cheap removals first)."""
@@ -74,6 +75,11 @@ class Reduction:
     """Original transitions fired before any reduced one: the reduced net's initial
     marking is the one they reach (a rule may fire a transition eagerly at the start,
     see `fusion`)."""
+
+    closers: tuple[tuple[str, ...], ...] = ()
+    """Original sequences that a dead marking of the reduced net may still enable in the
+    original (`agglomerate.pre_agglomerate`): a deadlock witness fires them while they
+    are enabled, the last recorded first, to reach a dead marking of the original."""
 
     def expand_trace(self, trace: Sequence[str]) -> list[str]:
         """A firing sequence of the reduced net as one of the original net."""
@@ -141,5 +147,12 @@ def reduce_net(
             break
     seconds = time.monotonic() - start
     return Reduction(
-        net, w.to_net(), goal, dict(w.expand), dict(w.applied), seconds, tuple(w.prefix)
+        net,
+        w.to_net(),
+        goal,
+        dict(w.expand),
+        dict(w.applied),
+        seconds,
+        tuple(w.prefix),
+        tuple(w.closers),
     )

@@ -26,7 +26,8 @@ def shaped_nets(draw: st.DrawFn) -> Net:
     """A random net plus the shapes of the rules: a fresh place ``q`` that some
     transitions produce into (multiples of ``w``) and one to three transitions consume
     alone (``pre = {q: w}``), copies of transitions, a place ``r`` with initial tokens
-    that only ``mv`` consumes (places in series), and self-loops."""
+    that only ``mv`` consumes (places in series), a transition ``h`` with a private input
+    feeding a place ``pp`` alone (pre-agglomeration), and self-loops."""
     net = draw(small_nets(max_places=4, max_transitions=4))
     names = [p.name for p in net.places]
     weight = draw(st.integers(1, 2))
@@ -55,11 +56,32 @@ def shaped_nets(draw: st.DrawFn) -> Net:
         for t in transitions
     ]
     transitions.append(Transition("mv", (("r", 1),), ((draw(st.sampled_from(names)), 1),)))
+    # Pre-agglomeration: h takes from its own place s and feeds pp alone; pp's
+    # consumers take a from it and may need another place too.
+    a = draw(st.integers(1, 2))
+    feeders = set(draw(st.lists(st.sampled_from(transitions), max_size=2)))
+    transitions = [
+        Transition(t.name, t.inputs, (*t.outputs, ("s", 1))) if t in feeders else t
+        for t in transitions
+    ]
+    transitions.append(Transition("h", (("s", 1),), (("pp", a),)))
+    for i in range(draw(st.integers(1, 2))):
+        extra = draw(st.dictionaries(st.sampled_from(names), st.integers(1, 2), max_size=1))
+        out = draw(st.dictionaries(st.sampled_from(names), st.integers(1, 2), max_size=2))
+        transitions.append(
+            Transition(f"g{i}", (("pp", a), *sorted(extra.items())), tuple(sorted(out.items())))
+        )
     for i in range(draw(st.integers(0, 2))):
         loop = draw(st.dictionaries(st.sampled_from(names), st.integers(1, 2), max_size=2))
         arcs = tuple(sorted(loop.items()))
         transitions.append(Transition(f"loop{i}", inputs=arcs, outputs=arcs))
-    places = (*net.places, Place("q"), Place("r", draw(st.integers(0, 2))))
+    places = (
+        *net.places,
+        Place("q"),
+        Place("r", draw(st.integers(0, 2))),
+        Place("s", draw(st.integers(0, 2))),
+        Place("pp"),
+    )
     return Net(name="shaped", places=places, transitions=tuple(transitions))
 
 
@@ -191,6 +213,7 @@ def test_places_in_series_with_initial_tokens_start_the_witness_with_the_prefix(
         transitions=(
             _t("mv", {"r": 1}, {"s": 1}),
             _t("use", {"s": 1, "lock": 1}, {}),
+            _t("give", {"lock": 1}, {"s": 1}),  # a second producer: no pre-agglomeration
         ),
     )
     red = reduce_net(net, Goal.deadlock())
@@ -218,3 +241,23 @@ def test_a_marked_two_cycle_with_a_reader_is_deadlock_free_without_a_search() ->
     answer = decide_deadlock(net)
     assert answer.deadlock is False
     assert len(answer.reduction.net.transitions) == 1 and not answer.reduction.net.places
+
+
+def test_pre_agglomeration_completes_the_witness_with_the_postponed_transition() -> None:
+    """``mv`` only moves ``r``'s tokens to ``s``, which ``use`` consumes with the lock:
+    ``mv`` is merged into ``use``. The reduced net is dead with a token left in ``r``,
+    where the original can still fire ``mv``: the witness ends with it."""
+    net = Net(
+        name="pre",
+        places=(Place("r", 2), Place("s"), Place("lock", 1)),
+        transitions=(
+            _t("mv", {"r": 1}, {"s": 1}),
+            _t("use", {"s": 1, "lock": 1}, {}),
+        ),
+    )
+    red = reduce_net(net, Goal.deadlock())
+    assert red.applied.get("pre-agglomeration") == 1 and red.closers == (("mv",),)
+    answer = decide_deadlock(net)
+    assert answer.deadlock is True and answer.trace == ["mv", "use", "mv"]
+    reached = replay(net, answer.trace)
+    assert reached is not None and is_dead(net, reached)
