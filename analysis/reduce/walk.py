@@ -20,7 +20,7 @@ from coral_lang.net import Net
 
 WALK_STEPS = 300
 """Steps of all walks together: at most a few milliseconds on the reduced conformance
-nets; every dead marking a walk found there was within 75 steps."""
+nets; every dead marking a walk found there was within 33 steps."""
 
 
 def walk_to_deadlock(net: Net, *, steps: int = WALK_STEPS, seed: int = 0) -> list[str] | None:
