@@ -84,6 +84,9 @@ class DeadlockAnswer:
     stopped_reason: str | None = None
     proof: str | None = None
     """When ``deadlock`` is False without a search (``states`` 0): what proved it."""
+    by: str = "search"
+    """What decided: ``"search"`` (the reduced net explored), ``"random walk"`` (a walk
+    reached the dead marking) or ``"siphon-trap"`` (`proof`)."""
 
 
 def replay(net: Net, trace: Sequence[str]) -> list[int] | None:
@@ -162,9 +165,9 @@ def decide_deadlock(
     if walked is not None:
         trace = dead_witness(net, red, walked)
         if trace is not None:
-            return DeadlockAnswer(True, trace, red, 0)
+            return DeadlockAnswer(True, trace, red, 0, by="random walk")
     if reducible(net) and siphons_prove_deadlock_free(red.net, budget):
-        return DeadlockAnswer(False, None, red, 0, proof=SIPHON_PROOF)
+        return DeadlockAnswer(False, None, red, 0, proof=SIPHON_PROOF, by="siphon-trap")
     early = reducible(net) and len(red.net.transitions) <= EARLY_STOP_TRANSITIONS
     first_dead = _FirstDead(red.net) if early else None
     space = explore(red.net, max_states=max_states, budget=budget, stop_when=first_dead)
