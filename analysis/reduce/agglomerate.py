@@ -1,6 +1,9 @@
-"""Agglomeration of transitions in series (a restricted post-agglomeration).
+"""Agglomeration of transitions: in series, and the general pre- and post-agglomeration.
 
-Rule (Berthelot 1986, "Checking properties of nets using transformations"; the same
+`agglomerate_series` (below), `post_agglomerate` and `pre_agglomerate` (their
+docstrings give the conditions and the preservation arguments).
+
+Series rule (Berthelot 1986, "Checking properties of nets using transformations"; the same
 shape as TAPAAL's rule A, Bønneland et al. 2019): a place ``p``, initially empty, with
 exactly one producer ``t1`` and one consumer ``t2`` (``t1 != t2``), where ``p`` is the
 only output of ``t1`` and the only input of ``t2``, both with the same weight. Then
