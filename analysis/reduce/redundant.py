@@ -42,24 +42,37 @@ def remove_duplicate_transitions(w: WorkNet) -> bool:
     return removed
 
 
-def _dominated_self_loop(w: WorkNet, t: str) -> bool:
-    pre = w.pre[t]
-    if not pre:
-        return False  # left for `collapse_live` (nothing is smaller)
-    # A dominating u with inputs consumes from some place of pre(t); look only there.
-    candidates = {u for p in pre for u in w.consumers[p]} - {t}
-    return any(all(pre.get(q, 0) >= n for q, n in w.pre[u].items()) for u in candidates)
+def _by_rarest_input(w: WorkNet) -> dict[str, list[str]]:
+    """Transitions with inputs, each listed under the input place with the fewest
+    consumers: a ``u`` with ``pre(u) <= pre(t)`` is listed under a place of ``pre(t)``,
+    so the candidates for ``t`` are the lists of its input places (each ``u`` in one
+    list, so a place that thousands read costs nothing extra)."""
+    index: dict[str, list[str]] = {}
+    for u, pre in w.pre.items():
+        if pre:
+            rarest = min(pre, key=lambda q: (len(w.consumers[q]), q))
+            index.setdefault(rarest, []).append(u)
+    return index
 
 
 def remove_dominated_self_loops(w: WorkNet) -> bool:
     """For deadlock: remove self-loops enabled only where another transition is."""
     if w.goal.kind is not Kind.DEADLOCK:
         return False
+    loops = [t for t in w.pre if w.pre[t] == w.post[t] and t not in w.protected_transitions]
+    if not loops:
+        return False
+    index = _by_rarest_input(w)
     removed = False
-    for t in list(w.pre):
-        if w.pre[t] != w.post[t] or t in w.protected_transitions:
-            continue
-        if _dominated_self_loop(w, t):
+    for t in loops:
+        pre = w.pre[t]
+        if not pre:
+            continue  # left for `collapse_live` (nothing is smaller)
+        if any(
+            u != t and u in w.pre and all(pre.get(q, 0) >= n for q, n in w.pre[u].items())
+            for p in pre
+            for u in index.get(p, ())
+        ):
             w.remove_transition(t)
             w.applied["dominated-self-loop"] += 1
             removed = True

@@ -42,7 +42,7 @@ def walk_to_deadlock(net: Net, *, steps: int = WALK_STEPS, seed: int = 0) -> lis
     for j, arcs in enumerate(pre):
         for i, _ in arcs:
             readers[i].append(j)
-    touched = [sorted({j for i in d for j in readers[i]}) for d in delta]
+    touched: dict[int, list[int]] = {}  # transitions whose enabledness j's firing may change
     rng = random.Random(seed)
     length = max(16, 2 * (len(net.places) + len(net.transitions)))
     left = steps
@@ -58,6 +58,8 @@ def walk_to_deadlock(net: Net, *, steps: int = WALK_STEPS, seed: int = 0) -> lis
             trace.append(j)
             left -= 1
             changed = False
+            if j not in touched:  # only for transitions fired: wide nets stay cheap
+                touched[j] = sorted({u for i in delta[j] for u in readers[i]})
             for u in touched[j]:
                 now = all(marking[i] >= w for i, w in pre[u])
                 if now != (u in on):
