@@ -16,8 +16,10 @@ their search.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 from analysis.budget import Budget
-from analysis.siphons import maximal_trap, minimal_siphons
+from analysis.siphons import minimal_siphons
 from coral_lang.net import Net
 
 SIPHON_BRANCHES = 100
@@ -43,5 +45,25 @@ def siphons_prove_deadlock_free(net: Net, budget: Budget | None = None) -> bool:
     found = minimal_siphons(net, scale * SIPHON_BRANCHES, Budget(seconds))
     if not found.complete:
         return False
+    consumers: dict[str, list[frozenset[str]]] = {p.name: [] for p in net.places}
+    for t in net.transitions:
+        outputs = frozenset(p for p, _ in t.outputs)
+        for p, _ in t.inputs:
+            consumers[p].append(outputs)
     marked = {p.name for p in net.places if p.initial}
-    return all(maximal_trap(net, siphon) & marked for siphon in found.siphons)
+    return all(_max_trap(siphon, consumers) & marked for siphon in found.siphons)
+
+
+def _max_trap(places: Iterable[str], consumers: dict[str, list[frozenset[str]]]) -> set[str]:
+    """The largest trap inside ``places``: drop a place while some transition takes from
+    it without putting back into what is left (as `analysis.siphons.maximal_trap`, with
+    the arcs indexed once for all siphons rather than once per siphon)."""
+    trap = set(places)
+    changed = True
+    while changed:
+        changed = False
+        for p in list(trap):
+            if any(not (outputs & trap) for outputs in consumers[p]):
+                trap.discard(p)
+                changed = True
+    return trap
