@@ -1,7 +1,7 @@
 """Redundant transitions: duplicates, dominated self-loops, and always-enabled ones.
 
 Rules (Berthelot 1986; TAPAAL's rules for parallel transitions and self-loops,
-Jensen, Larsen & Srba 2016 and Bønneland et al. 2019):
+Jensen, Nielsen, Oestergaard & Srba 2016 and Bønneland et al. 2019):
 
 * *duplicate transitions*: ``t`` and ``u`` with ``pre(t) = pre(u)`` and
   ``post(t) = post(u)``; an unobserved one goes. Both are enabled in the same markings
