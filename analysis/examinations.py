@@ -144,8 +144,9 @@ class QueryLimits:
         time_limit: seconds for the whole session (searches, graph, every formula).
         max_edges: edges of the reachability graph (CTL, LTL, Liveness).
         max_product_edges: reachable edges of one LTL product.
-        reductions: whether reachability and bounds formulas the full search leaves
-            undecided are tried on the structurally reduced net (`analysis.reduce`).
+        reductions: whether ReachabilityDeadlock is tried on the structurally reduced
+            net first, and reachability and bounds formulas the full search leaves
+            undecided after it (`analysis.reduce`).
         memory_limit: bytes of resident memory the process may use (checked by every
             search, the graph, the LTL product and CTL labelling through the budget).
         method: "explicit", "symbolic" (ReachabilityDeadlock and the state count from a
@@ -850,7 +851,7 @@ class QuerySession:
         from analysis.reduce import decide_deadlock
         from analysis.reduce.driver import reducible
 
-        if not reducible(self.net):
+        if not reducible(self.net) or not self.limits.reductions:
             return None
         left = self.remaining()
         answer = decide_deadlock(
@@ -861,7 +862,10 @@ class QuerySession:
         if answer.deadlock is None:
             return None
         trace = tuple(answer.trace) if answer.trace is not None else None
-        techniques = ("STRUCTURAL_REDUCTION", *EXPLICIT)
+        techniques = {
+            "random walk": ("STRUCTURAL_REDUCTION", "RANDOM_WALK"),
+            "siphon-trap": ("STRUCTURAL_REDUCTION", "TOPOLOGICAL"),
+        }.get(answer.by, ("STRUCTURAL_REDUCTION", *EXPLICIT))
         return Answer("", answer.deadlock, techniques, method="global", trace=trace)
 
     def _deadlock_free_by_state_equation(self) -> Answer | None:

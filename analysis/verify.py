@@ -702,7 +702,9 @@ class _Checker:
                 title,
                 Verdict.PROVEN,
                 REDUCED,
-                f"all {answer.states} reachable states of the reduced net explored ({size}); "
+                f"{answer.proof} ({size})"
+                if answer.proof
+                else f"all {answer.states} reachable states of the reduced net explored ({size}); "
                 + (
                     "every dead marking is a declared final marking"
                     if self.net.finals

@@ -2,9 +2,10 @@
 
 Run ``.venv/bin/python bench/reductions.py --help``. For each of the 47 instances:
 places/transitions before and after `analysis.reduce.reduce_net`, markings explored on
-the reduced net, seconds (reduction + search + witness replay, in this process), the
-verdict against the oracle; with ``--peer``, TAPAAL's verifypn with its default
-reductions on the same question, in the same run. The last lines count the verdicts
+the reduced net, seconds (reduction, random walks, siphon-trap check, search and witness
+replay, in this process), the verdict against the oracle and what decided it; with
+``--peer``, TAPAAL's verifypn with its default reductions on the same question, in the
+same run. The last lines count the verdicts
 decided under 0.1 s and any disagreement with the oracle (exit status 1 if one).
 
 ``--queries``: the ReachabilityCardinality, ReachabilityFireability and UpperBounds
@@ -181,7 +182,7 @@ def main() -> int:
                 ok = answer.deadlock == model["deadlock"]
                 wrong += not ok
                 fast += seconds < FAST
-                verdict = f"{str(answer.deadlock).lower()} {'ok' if ok else 'WRONG'}"
+                verdict = f"{str(answer.deadlock).lower()} {'ok' if ok else 'WRONG'} ({answer.by})"
             line = (
                 f"{name:38} {len(net.places):>5}/{len(net.transitions):<5} "
                 f"{len(red.places):>5}/{len(red.transitions):<5} {answer.states:>9} "

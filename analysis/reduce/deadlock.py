@@ -1,9 +1,12 @@
 """The deadlock question answered on the reduced net, with the witness mapped back.
 
-The reduced net is explored (`analysis.statespace.explore`); a dead marking found
-there yields a firing sequence that is expanded (`Reduction.expand_trace`) and
-replayed on the original net before it is trusted, so a witness is always checked
-on the net the user gave.
+Random walks on the reduced net try first (`walk`: a few hundred steps, often enough
+when the net blocks quickly), then the siphon-trap property (`siphon_trap`: a cheap
+proof that no dead marking is reachable, when the enumeration is small); otherwise the
+reduced net is explored (`analysis.statespace.explore`). A dead marking found either way
+yields a firing sequence that is expanded (`Reduction.expand_trace`) and replayed on the
+original net before it is trusted, so a witness is always checked on the net the user
+gave.
 """
 
 from __future__ import annotations
@@ -17,12 +20,20 @@ import numpy.typing as npt
 from analysis.budget import Budget
 from analysis.reduce.driver import Reduction, reduce_net, reducible
 from analysis.reduce.goal import Goal, Kind
+from analysis.reduce.siphon_trap import siphons_prove_deadlock_free
+from analysis.reduce.walk import walk_to_deadlock
 from analysis.statespace import explore
 from coral_lang.net import Net
 
 WITNESS_FAILED = "the reduced net's deadlock witness does not replay on the original net"
 """``stopped_reason`` when a mapped-back witness fails its replay (a reduction bug: the
 caller falls back to the unreduced search rather than trust the verdict)."""
+
+SIPHON_PROOF = (
+    "siphon-trap property of the reduced net: every minimal siphon of the ordinary net "
+    "contains an initially marked trap"
+)
+"""`DeadlockAnswer.proof` when `siphons_prove_deadlock_free` decided."""
 
 EARLY_STOP_TRANSITIONS = 2000
 """Nets with at most this many transitions stop at the first dead marking stored; the
@@ -68,8 +79,14 @@ class DeadlockAnswer:
     """With ``deadlock``: a firing sequence of the original net reaching a dead marking."""
     reduction: Reduction
     states: int
-    """Markings stored while exploring the reduced net."""
+    """Markings stored while exploring the reduced net (0 when a random walk found the
+    dead marking and no search ran)."""
     stopped_reason: str | None = None
+    proof: str | None = None
+    """When ``deadlock`` is False without a search (``states`` 0): what proved it."""
+    by: str = "search"
+    """What decided: ``"search"`` (the reduced net explored), ``"random walk"`` (a walk
+    reached the dead marking) or ``"siphon-trap"`` (`proof`)."""
 
 
 def replay(net: Net, trace: Sequence[str]) -> list[int] | None:
@@ -82,6 +99,38 @@ def replay(net: Net, trace: Sequence[str]) -> list[int] | None:
             return None
         marking = net.fire(marking, t)
     return list(marking)
+
+
+MAX_CLOSING_FIRINGS = 100_000
+"""Closer firings at most when completing a witness (each only drains its private
+inputs, so this is never reached on a net the rule applied to)."""
+
+
+def dead_witness(net: Net, red: Reduction, reduced: Sequence[str]) -> list[str] | None:
+    """The firing sequence of ``net`` for a dead marking the reduced net reaches by
+    ``reduced``: expanded, replayed, then completed by firing the reduction's closers
+    while enabled (last recorded first); None unless it ends in a dead marking of
+    ``net`` (a rule would be wrong: the caller decides nothing)."""
+    trace = red.expand_trace(reduced)
+    reached = replay(net, trace)
+    if reached is None:
+        return None
+    marking = tuple(reached)
+    fired = 0
+    for closer in reversed(red.closers):
+        while fired < MAX_CLOSING_FIRINGS:
+            after = marking
+            for name in closer:
+                t = net.transition(name)
+                if not net.enabled(after, t):
+                    break
+                after = net.fire(after, t)
+            else:
+                marking, fired = after, fired + 1
+                trace.extend(closer)
+                continue
+            break
+    return trace if is_dead(net, marking) else None
 
 
 def is_dead(net: Net, marking: Sequence[int]) -> bool:
@@ -112,6 +161,13 @@ def decide_deadlock(
     if accepted is not None:
         return _decide_unaccepted(net, accepted, max_states, budget, reduction)
     red = reduction or reduce_net(net, Goal.deadlock(), budget=budget)
+    walked = walk_to_deadlock(red.net) if reducible(net) else None
+    if walked is not None:
+        trace = dead_witness(net, red, walked)
+        if trace is not None:
+            return DeadlockAnswer(True, trace, red, 0, by="random walk")
+    if reducible(net) and siphons_prove_deadlock_free(red.net, budget):
+        return DeadlockAnswer(False, None, red, 0, proof=SIPHON_PROOF, by="siphon-trap")
     early = reducible(net) and len(red.net.transitions) <= EARLY_STOP_TRANSITIONS
     first_dead = _FirstDead(red.net) if early else None
     space = explore(red.net, max_states=max_states, budget=budget, stop_when=first_dead)
@@ -119,9 +175,8 @@ def decide_deadlock(
     if dead is None and space.deadlocks.size:
         dead = int(space.deadlocks[0])
     if dead is not None:
-        trace = red.expand_trace(space.trace_names(dead))
-        reached = replay(net, trace)
-        if reached is None or not is_dead(net, reached):  # a rule is wrong: say so, decide nothing
+        trace = dead_witness(net, red, space.trace_names(dead))
+        if trace is None:  # a rule is wrong: say so, decide nothing
             return DeadlockAnswer(None, None, red, space.states, WITNESS_FAILED)
         return DeadlockAnswer(True, trace, red, space.states)
     if space.complete:
@@ -161,9 +216,9 @@ def _decide_unaccepted(
         if replayed >= DEAD_REPLAYS:
             reason = f"more than {DEAD_REPLAYS} dead markings to replay"
             return DeadlockAnswer(None, None, red, space.states, reason)
-        trace = red.expand_trace(space.trace_names(int(state)))
-        reached = replay(net, trace)
-        if reached is None or not is_dead(net, reached):
+        trace = dead_witness(net, red, space.trace_names(int(state)))
+        reached = None if trace is None else replay(net, trace)
+        if trace is None or reached is None:
             return DeadlockAnswer(None, None, red, space.states, WITNESS_FAILED)
         if not accepted(reached):
             return DeadlockAnswer(True, trace, red, space.states)

@@ -1,6 +1,7 @@
 """Apply the reduction rules to a fixpoint and map answers back to the original net.
 
-`reduce_net` runs the rule families (`dead`, `implicit`, `agglomerate`, `fusion`)
+`reduce_net` runs the rule families (`dead`, `redundant`, `implicit`, `agglomerate`,
+`fusion`)
 until none applies, the round limit is hit or the budget's deadline passes (each rule is
 sound on its own, so stopping between two rules is always safe). The `Reduction` it
 returns expands a reduced firing sequence into an original one (`expand_trace`): a
@@ -17,7 +18,7 @@ from dataclasses import dataclass, field
 
 from analysis.budget import Budget
 from analysis.inputs import has_inputs
-from analysis.reduce.agglomerate import agglomerate_series
+from analysis.reduce.agglomerate import agglomerate_series, post_agglomerate, pre_agglomerate
 from analysis.reduce.dead import (
     remove_dead_transitions,
     remove_neutral_transitions,
@@ -27,6 +28,11 @@ from analysis.reduce.fusion import fuse_series_places
 from analysis.reduce.goal import Goal
 from analysis.reduce.implicit import remove_implicit_places
 from analysis.reduce.implicit_lp import remove_lp_implicit_places
+from analysis.reduce.redundant import (
+    collapse_live,
+    remove_dominated_self_loops,
+    remove_duplicate_transitions,
+)
 from analysis.reduce.work import WorkNet
 from coral_lang.net import Net
 
@@ -36,8 +42,13 @@ RULES: tuple[Rule, ...] = (
     remove_dead_transitions,
     remove_sink_places,
     remove_neutral_transitions,
+    remove_duplicate_transitions,
+    remove_dominated_self_loops,
+    collapse_live,
     remove_implicit_places,
     agglomerate_series,
+    post_agglomerate,
+    pre_agglomerate,
     fuse_series_places,
 )
 """The rule families in the order one round applies them (cheap removals first)."""
@@ -60,10 +71,19 @@ class Reduction:
     applied: dict[str, int] = field(default_factory=dict)
     """How many times each rule applied."""
     seconds: float = 0.0
+    prefix: tuple[str, ...] = ()
+    """Original transitions fired before any reduced one: the reduced net's initial
+    marking is the one they reach (a rule may fire a transition eagerly at the start,
+    see `fusion`)."""
+
+    closers: tuple[tuple[str, ...], ...] = ()
+    """Original sequences that a dead marking of the reduced net may still enable in the
+    original (`agglomerate.pre_agglomerate`): a deadlock witness fires them while they
+    are enabled, the last recorded first, to reach a dead marking of the original."""
 
     def expand_trace(self, trace: Sequence[str]) -> list[str]:
         """A firing sequence of the reduced net as one of the original net."""
-        return [name for t in trace for name in self.expansion[t]]
+        return [*self.prefix, *(name for t in trace for name in self.expansion[t])]
 
     def summary(self) -> str:
         """One line: sizes before and after, and the rules used."""
@@ -125,6 +145,14 @@ def reduce_net(
             changed = rule(w) or changed
         if not changed or _expired(budget):
             break
+    seconds = time.monotonic() - start
     return Reduction(
-        net, w.to_net(), goal, dict(w.expand), dict(w.applied), time.monotonic() - start
+        net,
+        w.to_net(),
+        goal,
+        dict(w.expand),
+        dict(w.applied),
+        seconds,
+        tuple(w.prefix),
+        tuple(w.closers),
     )

@@ -26,6 +26,12 @@ class WorkNet:
         self.pre: Arcs = {t.name: dict(t.inputs) for t in net.transitions}
         self.post: Arcs = {t.name: dict(t.outputs) for t in net.transitions}
         self.expand: dict[str, tuple[str, ...]] = {t.name: (t.name,) for t in net.transitions}
+        self.prefix: list[str] = []
+        self.closers: list[tuple[str, ...]] = []
+        """Original sequences a dead marking of the reduced net may still enable in the
+        original (`pre_agglomerate`); a witness fires them while enabled, last first."""
+        """Original transitions fired before any reduced one (the working net's initial
+        marking is the one they reach in the original)."""
         self.consumers: defaultdict[str, set[str]] = defaultdict(set)
         self.producers: defaultdict[str, set[str]] = defaultdict(set)
         for t in net.transitions:
