@@ -91,6 +91,12 @@ REALISE_NODES = 20_000  # firing orders tried to turn a state-equation solution 
 UNBOUNDED_SECONDS = 3.0
 EXPLICIT_POR = "explicit state space (stubborn-set reduced)"
 REDUCED = "structural reductions + explicit state space of the reduced net"
+REDUCED_BY = {
+    "random walk": "structural reductions + random walk on the reduced net",
+    "siphon-trap": "structural reductions + siphon-trap property of the reduced net",
+}
+"""The method of a deadlock verdict the reduced net decided without its search
+(`analysis.reduce.deadlock.DeadlockAnswer.by`)."""
 AUTO_SYMBOLIC_SHARE = 0.5  # of the time left, for decision diagrams after an explicit stop
 TIMED = "timed analysis (zones)"
 UNTIMED_WITHIN = "decided by timed analysis: run coral-check verify --timed"
@@ -696,12 +702,13 @@ class _Checker:
         if answer.deadlock is None:
             return None
         size = answer.reduction.summary()
+        method = REDUCED_BY.get(answer.by, REDUCED)
         if not answer.deadlock:
             return PropertyResult(
                 "deadlock",
                 title,
                 Verdict.PROVEN,
-                REDUCED,
+                method,
                 f"{answer.proof} ({size})"
                 if answer.proof
                 else f"all {answer.states} reachable states of the reduced net explored ({size}); "
@@ -721,7 +728,7 @@ class _Checker:
             "deadlock",
             title,
             Verdict.VIOLATED,
-            REDUCED,
+            method,
             f"{'a non-final dead marking' if self.net.finals else 'a dead marking'}"
             f" is reachable in {len(sequence)} step(s) (found on the reduced net: {size}; "
             "trace mapped back and replayed on this net)",
