@@ -49,6 +49,7 @@ Typical use::
 from __future__ import annotations
 
 import ctypes
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import cast
@@ -439,6 +440,31 @@ class SleepSets:
         return out
 
 
+class _RowQueue:
+    """Rows of a list of arrays read front to back, ``take(n)`` at a time; an array is
+    forgotten once its last row is read, so its memory goes back to the allocator
+    while the reader is still busy with the others."""
+
+    def __init__(self, pieces: list[npt.NDArray[np.uint64]]) -> None:
+        self._pieces = deque(pieces)
+        self._offset = 0  # rows of the first piece already read
+
+    def take(self, n: int) -> npt.NDArray[np.uint64]:
+        """The next ``n`` rows (fewer only when none are left)."""
+        parts: list[npt.NDArray[np.uint64]] = []
+        while n > 0 and self._pieces:
+            piece = self._pieces[0]
+            rows = min(n, piece.shape[0] - self._offset)
+            parts.append(piece[self._offset : self._offset + rows])
+            self._offset += rows
+            n -= rows
+            if self._offset == piece.shape[0]:
+                self._pieces.popleft()
+                self._offset = 0
+        assert parts, "a layer's sleep sets cover its states"
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
 class _Round:
     """The levels of one narrow round (see `_Explorer.speculate`): per level, the
     candidates' columns and keys, the edge (source in the level above, transition) that
@@ -711,7 +737,7 @@ class _Explorer:
         self.start = budget.clock()
         small = max_states is not None and max_states < np.iinfo(np.int32).max // 2
         self.index_type = np.int32 if small else np.int64
-        self.via_type = np.int16 if cn.n_transitions < np.iinfo(np.int16).max else np.int32
+        self.via_type = _via_type(cn.n_transitions)
         layout = Layout.initial_guess(cn, one_hot_components(cn, budget))
         self.fnet = fnet = FieldNet(cn, layout)
         self.index = _EnablingIndex(fnet, layout, cn.n_transitions)
@@ -1239,14 +1265,18 @@ class _Explorer:
                 continue
             self.next_sleep = []
             self.sleep_next = self.sleep is not None and self.edges >= SLEEP_MIN_DEGREE * base
-            sleep_all = None if not sleeps else np.concatenate(sleeps)
+            # Each block takes its sleep sets off the front of the layer's pieces, which
+            # are dropped as they are used up: a wide layer's sleep sets (8 bytes per
+            # tracked 64 transitions per state) are never held twice, and they shrink
+            # as the next layer's grow.
+            sleep_all = None if not sleeps else _RowQueue(sleeps)
             sleeps = None
             c = 0
             while c < width:
                 size = min(self.block_size(), width - c)
                 self.guard(size * self.fnet.n_fields * (self.dtype.itemsize + 8))
                 cols = self.frontier(base + c, size)
-                part = None if sleep_all is None else sleep_all[c : c + size]
+                part = None if sleep_all is None else sleep_all.take(size)
                 self.step(cols, part, base + c, [])
                 if self.stopped:
                     raise BudgetExceeded(self.stopped)
@@ -1434,6 +1464,16 @@ class _Explorer:
         """`guard` before storing up to ``candidates`` successors (`insert_bytes`)."""
         self.guard(*self.insert_bytes(candidates))
         self.offered += candidates
+
+
+def _via_type(n_transitions: int) -> type[np.unsignedinteger]:
+    """The narrowest unsigned type that numbers ``n_transitions`` transitions: the
+    arriving transition is kept for every state, so one byte instead of two is a byte
+    per state on the many nets with fewer than 256 transitions."""
+    for candidate in (np.uint8, np.uint16):
+        if n_transitions <= np.iinfo(candidate).max:
+            return candidate
+    return np.uint32
 
 
 def _unsigned(dtype: np.dtype[np.integer]) -> np.dtype[np.unsignedinteger]:
