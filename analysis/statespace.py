@@ -74,6 +74,7 @@ from analysis.encoding import (
     FieldNet,
     Growable,
     KeyStore,
+    KeyView,
     Layout,
     one_hot_components,
     row_dtype,
@@ -150,7 +151,7 @@ class StateSpace:
     depth: int
     reduced: bool
     layout: Layout = field(repr=False)
-    keys: npt.NDArray[np.uint64] = field(repr=False)
+    keys: KeyView = field(repr=False)
     store: KeyStore = field(repr=False)
     key_delta: npt.NDArray[np.uint64] = field(repr=False)
     via: npt.NDArray[np.integer] = field(repr=False)
@@ -194,7 +195,7 @@ class StateSpace:
         Decodes all keys at once (``8 * places`` bytes per state); use
         `iter_markings` or `find` on big state spaces.
         """
-        return self.layout.unpack(self.keys).astype(np.int64)
+        return self.layout.unpack(self.keys[:]).astype(np.int64)
 
     def iter_markings(self, chunk: int = 1 << 16) -> Iterator[tuple[int, Markings]]:
         """``(first_state, markings)`` blocks of at most ``chunk`` states, in order (fewer
@@ -754,7 +755,12 @@ class _Explorer:
         self._set_layout(layout)
         self.widenings = np.zeros(cn.n_places, dtype=np.int64)  # per place
         self.reserve = min(max_states or DEFAULT_RESERVE, RESERVE_LIMIT)
-        self.store = KeyStore(self.layout.n_words, wide_index=not small, reserve=self.reserve)
+        self.store = KeyStore(
+            self.layout.n_words,
+            wide_index=not small,
+            reserve=self.reserve,
+            word_bytes=self.layout.word_bytes,
+        )
         self.via = Growable((), self.via_type, self.reserve)
         self.via.append(np.zeros(1, dtype=self.via_type))
         self.dead: list[npt.NDArray[np.int64]] = []
@@ -1016,16 +1022,16 @@ class _Explorer:
                 " explorer counts exactly (the net may be unbounded)"
             )
             raise BudgetExceeded(self.stopped)
-        keys = self.store.keys
-        if layout.n_words == self.layout.n_words:
-            # In place, a block at a time: no second copy of the store.
-            self.guard(BLOCK_TEMPORARIES)
-            packed = self.layout.repack(keys, layout, out=keys)
-        else:
-            self.guard(BLOCK_TEMPORARIES, keys.shape[0] * 8 * layout.n_words)
-            packed = self.layout.repack(keys, layout)
+        # A block at a time, in place when the rows keep their bytes: never a second
+        # copy of the store as words.
+        new_row = sum(layout.word_bytes)
+        fresh = 0 if new_row == sum(self.store.word_bytes) else self.store.size * new_row
+        self.guard(BLOCK_TEMPORARIES, fresh)
+        old = self.layout
+        self.store.repack(
+            lambda block: old.repack(block, layout), layout.n_words, layout.word_bytes
+        )
         self._set_layout(layout)
-        self.store.rekey(packed)
         for i, block in enumerate(blocks):
             blocks[i] = block.astype(self.dtype)
 
@@ -1720,7 +1726,7 @@ def _explore_with_inputs(
             complete=True,
             stopped_reason=None,
             depth=1,
-            keys=space.keys[:1],
+            keys=space.keys,
             via=space.via[:1],
             layer_starts=np.zeros(1, dtype=np.int64),
         )

@@ -5,6 +5,8 @@ Part of `analysis.encoding`; see its docstring for how the pieces fit."""
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -246,6 +248,228 @@ def _reserved(shape: tuple[int, ...], dtype: npt.DTypeLike) -> npt.NDArray[Any]:
         return np.zeros((min(rows, 1 << 12), *shape[1:]), dtype=dtype)
 
 
+_PAD = 16
+"""Bytes past the last row of a `PackedRows` buffer: the two aligned words read for the
+last row's last word stay inside the buffer."""
+
+_S3, _S63 = np.uint64(3), np.uint64(63)
+
+
+class PackedRows:
+    """Keys of ``len(word_bytes)`` words, each stored in only its low ``word_bytes[w]``
+    bytes (the bytes its fields use; the others are always zero), rows back to back.
+
+    A one-word key of 37 bits takes 5 bytes instead of 8. A range of rows is read
+    through a strided ``uint64`` view per word (it starts at the word's offset in the
+    row and steps by the row's bytes; it reads the bytes after the word too, which a
+    mask clears). A gather of scattered rows reads, per word, the two aligned words
+    of the buffer that hold its bytes and shifts them together (numpy's ``take``
+    would first copy a whole unaligned view, and its fancy indexing of one runs at a
+    third of the speed). With whole words the rows are a plain ``(rows, words)``
+    array. The buffer is reserved like `Growable`'s (zeroed memory, address space
+    until written) and grows by `GROWTH` past the reservation. Bytes are read
+    little-endian; a big-endian machine keeps whole words.
+    """
+
+    def __init__(self, word_bytes: Sequence[int], reserve: int) -> None:
+        self.word_bytes = tuple(int(b) for b in word_bytes)
+        if not self.word_bytes or not all(1 <= b <= 8 for b in self.word_bytes):
+            raise ValueError(f"PackedRows: word bytes must be 1..8, got {self.word_bytes}")
+        if sys.byteorder != "little":
+            self.word_bytes = (8,) * len(self.word_bytes)
+        self.n_words = len(self.word_bytes)
+        self.row_bytes = sum(self.word_bytes)
+        self.offsets = np.cumsum((0, *self.word_bytes[:-1])).tolist()
+        self.whole = self.row_bytes == 8 * self.n_words
+        self.masks = [np.uint64((1 << (8 * b)) - 1) for b in self.word_bytes]
+        self.size = 0
+        self._attach(_reserved((self._buffer_words(max(1, reserve)),), np.uint64))
+
+    def _buffer_words(self, rows: int) -> int:
+        """Words of a buffer for ``rows`` rows."""
+        return -(-(rows * self.row_bytes + _PAD) // 8)
+
+    def _attach(self, buffer: npt.NDArray[np.uint64]) -> None:
+        """Use ``buffer`` as the storage and make the views over it."""
+        self._buffer = buffer
+        data = buffer.view(np.uint8)
+        self._data = data
+        rows = (data.size - _PAD) // self.row_bytes
+        self._rows = rows
+        if self.whole:
+            whole: KeyArray = data[: rows * self.row_bytes].view(np.uint64)
+            self._whole = whole.reshape(rows, self.n_words)
+            return
+        self._views = [
+            np.ndarray((rows,), dtype="<u8", buffer=data, offset=o, strides=(self.row_bytes,))
+            for o in self.offsets
+        ]
+
+    @property
+    def capacity(self) -> int:
+        """Rows that fit without copying."""
+        return self._rows
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the rows written."""
+        return self.size * self.row_bytes
+
+    def _grown_rows(self, rows: int) -> int:
+        return max(rows, int(self._rows * GROWTH) + 1)
+
+    def growth_bytes(self, rows: int) -> int:
+        """As `Growable.growth_bytes`."""
+        end = self.size + rows
+        if end <= self._rows:
+            return rows * self.row_bytes
+        return self._grown_rows(end) * self.row_bytes
+
+    def ensure(self, rows: int) -> None:
+        """Room for ``rows`` rows (copies only past the reservation, by `GROWTH`)."""
+        if rows > self._rows:
+            grown = np.zeros(self._buffer_words(self._grown_rows(rows)), dtype=np.uint64)
+            used = self.size * self.row_bytes
+            grown.view(np.uint8)[:used] = self._data[:used]
+            self._attach(grown)
+
+    def put(self, start: int, words: KeyArray) -> None:
+        """Write ``words`` (shape ``(m, n_words)``) as rows ``start ...`` (within
+        ``size`` or right after it). Raises ``ValueError`` if a word uses a byte
+        beyond its ``word_bytes`` (the layout promised they are zero)."""
+        m = words.shape[0]
+        end = start + m
+        self.ensure(end)
+        if self.whole:
+            self._whole[start:end] = words
+        else:
+            for w, mask in enumerate(self.masks):
+                if (words[:, w] & ~mask).any():
+                    raise ValueError(
+                        f"PackedRows: a key uses more than {self.word_bytes[w]} bytes of word {w}"
+                    )
+            raw = (
+                np.ascontiguousarray(words, dtype="<u8").view(np.uint8).reshape(m, 8 * self.n_words)
+            )
+            rows = self._data[start * self.row_bytes : end * self.row_bytes].reshape(
+                m, self.row_bytes
+            )
+            for w, (o, b) in enumerate(zip(self.offsets, self.word_bytes, strict=True)):
+                rows[:, o : o + b] = raw[:, 8 * w : 8 * w + b]
+        self.size = max(self.size, end)
+
+    def append(self, words: KeyArray) -> None:
+        """Add ``words`` as the next rows."""
+        self.put(self.size, words)
+
+    def words(self, start: int, stop: int) -> KeyArray:
+        """Rows ``start .. stop - 1`` as words ``(m, n_words)`` (a view with whole
+        words: do not write to it)."""
+        stop = min(max(start, stop), self.size)
+        if self.whole:
+            view: KeyArray = self._whole[start:stop]
+            return view
+        out = np.empty((stop - start, self.n_words), dtype=np.uint64)
+        for w, view_w in enumerate(self._views):
+            np.bitwise_and(view_w[start:stop], self.masks[w], out=out[:, w])
+        return out
+
+    def take(self, ids: IntArray) -> KeyArray:
+        """Rows ``ids`` as words ``(len(ids), n_words)``."""
+        if self.whole:
+            rows: KeyArray = self._whole.take(ids, axis=0)
+            return rows
+        if self.n_words == 1:
+            return self.take_flat(ids)[:, None]
+        out = np.empty((ids.size, self.n_words), dtype=np.uint64)
+        for w in range(self.n_words):
+            out[:, w] = self._gather(ids, w)
+        return out
+
+    def _gather(self, ids: IntArray, w: int) -> KeyArray:
+        """Word ``w`` of rows ``ids``: the aligned buffer words ``q`` and ``q + 1``
+        hold its bytes from bit ``r`` of ``q`` on; ``(lo >> r) | (hi << (64 - r))``
+        joins them (the left shift done as ``1`` then ``63 - r``, so ``r = 0`` shifts
+        ``hi`` out entirely), and the mask clears the bytes of what follows."""
+        byte = np.multiply(ids, self.row_bytes, dtype=np.int64)
+        if self.offsets[w]:
+            byte += self.offsets[w]
+        q = byte >> 3
+        r = (byte & 7).view(np.uint64)
+        r <<= _S3
+        low = self._buffer.take(q)
+        q += 1
+        high = self._buffer.take(q)
+        low >>= r
+        high <<= _S1
+        r ^= _S63
+        high <<= r
+        low |= high
+        low &= self.masks[w]
+        return low
+
+    def take_flat(self, ids: IntArray) -> KeyArray:
+        """`take` of one-word rows as a 1-D array."""
+        if self.whole:
+            flat: KeyArray = self._whole[:, 0].take(ids)
+            return flat
+        return self._gather(ids, 0)
+
+
+class KeyView:
+    """The stored keys as words, read from a `PackedRows` only where they are
+    indexed: ``view[a:b]`` and ``view.take(ids, axis=0)`` build just those rows, so a
+    block of the frontier or a trace step never materialises the whole store. Any
+    other index, ``len``, ``shape`` and numpy conversion see the whole array."""
+
+    def __init__(self, rows: PackedRows) -> None:
+        self._rows = rows
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self._rows.size, self._rows.n_words)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes the rows take in the store."""
+        return self._rows.nbytes
+
+    def __len__(self) -> int:
+        return self._rows.size
+
+    def __getitem__(self, index: Any) -> KeyArray:
+        if isinstance(index, slice) and index.step in (None, 1):
+            start, stop, _ = index.indices(self._rows.size)
+            return self._rows.words(start, stop)
+        if isinstance(index, np.ndarray) and index.ndim == 1 and index.dtype.kind in "iu":
+            ids = np.where(index < 0, index + self._rows.size, index).astype(np.int64)
+            return self._rows.take(ids)
+        whole: KeyArray = self._rows.words(0, self._rows.size)[index]
+        return whole
+
+    def take(self, ids: IntArray, axis: int = 0) -> KeyArray:
+        """Rows ``ids`` (``axis`` must be 0)."""
+        assert axis == 0, "KeyView.take reads rows"
+        return self._rows.take(np.asarray(ids, dtype=np.int64))
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> KeyArray:
+        whole = self._rows.words(0, self._rows.size)
+        return whole if dtype is None else whole.astype(dtype)
+
+    def tolist(self) -> list[list[int]]:
+        rows: list[list[int]] = self._rows.words(0, self._rows.size).tolist()
+        return rows
+
+
+def _word_bytes(n_words: int, word_bytes: Sequence[int] | None) -> tuple[int, ...]:
+    """Bytes stored of each of ``n_words`` words: all 8 unless told."""
+    if word_bytes is None:
+        return (8,) * n_words
+    if len(word_bytes) != n_words:
+        raise ValueError(f"KeyStore: {len(word_bytes)} word byte counts for {n_words} words")
+    return tuple(int(b) for b in word_bytes)
+
+
 def _same(a: npt.NDArray[np.uint64], b: npt.NDArray[np.uint64]) -> BoolArray:
     """Row-wise equality of keys: 1-D arrays for one-word keys, rows otherwise."""
     if a.ndim == 1:
@@ -277,11 +501,12 @@ class KeyStore:
         capacity: int = 1 << 12,
         wide_index: bool = False,
         reserve: int | None = None,
+        word_bytes: Sequence[int] | None = None,
     ) -> None:
         self.n_words = n_words
         self._index_type = np.int64 if wide_index else np.int32
         reserve = min(max(capacity, reserve or 0), RESERVE_LIMIT)
-        self._keys = Growable((n_words,), np.uint64, reserve)
+        self._keys = PackedRows(_word_bytes(n_words, word_bytes), reserve)
         self._buffer = _reserved((int(reserve / MAX_LOAD) + 16,), self._index_type)
         self._use_table(max(16, int(capacity / MAX_LOAD) + 1))
 
@@ -298,27 +523,52 @@ class KeyStore:
         return self._keys.size
 
     @property
-    def keys(self) -> KeyArray:
-        """Keys of all stored states, shape ``(size, n_words)`` (a view)."""
-        keys: KeyArray = self._keys.view
-        return keys
+    def keys(self) -> KeyView:
+        """Keys of all stored states, shape ``(size, n_words)``, read as words where
+        indexed (`KeyView`)."""
+        return KeyView(self._keys)
+
+    @property
+    def word_bytes(self) -> tuple[int, ...]:
+        """Bytes stored of each key word."""
+        return self._keys.word_bytes
 
     @property
     def nbytes(self) -> int:
         """Bytes of the stored keys and of the table in use."""
-        return int(self.keys.nbytes + self._index.nbytes)
+        return int(self._keys.nbytes + self._index.nbytes)
 
-    def rekey(self, keys: KeyArray) -> None:
+    def rekey(self, keys: KeyArray, word_bytes: Sequence[int] | None = None) -> None:
         """Replace every stored key by ``keys`` (same states, same order, a new packing,
         pairwise distinct) and rebuild the table in place: a widening re-packs the
         store without allocating (and touching) a new table."""
-        keys = np.ascontiguousarray(keys)
-        if keys.shape[1] == self.n_words:
-            self._keys.view[:] = keys
+        self.repack(lambda block: block, keys.shape[1], word_bytes, source=keys)
+
+    def repack(
+        self,
+        convert: Callable[[KeyArray], KeyArray],
+        n_words: int,
+        word_bytes: Sequence[int] | None = None,
+        source: KeyArray | None = None,
+    ) -> None:
+        """Replace every stored key by ``convert`` of it (a new packing: same states,
+        same order, pairwise distinct keys of ``n_words`` words that use
+        ``word_bytes``), a block of `FILL_CHUNK` keys at a time, then rebuild the
+        table in place. With the same bytes per row the keys are rewritten in place;
+        otherwise the new rows are written to a new buffer (the old one is freed
+        after): no whole copy of the store as words is ever made."""
+        new_bytes = _word_bytes(n_words, word_bytes)
+        old = self._keys
+        read = (lambda a, b: source[a:b]) if source is not None else old.words
+        if new_bytes == old.word_bytes:
+            target = old
         else:
-            self.n_words = keys.shape[1]
-            self._keys = Growable((self.n_words,), np.uint64, self._keys.capacity)
-            self._keys.append(keys)
+            target = PackedRows(new_bytes, max(old.capacity, old.size))
+        for start in range(0, old.size, FILL_CHUNK):
+            stop = min(start + FILL_CHUNK, old.size)
+            target.put(start, np.ascontiguousarray(convert(read(start, stop))))
+        self._keys = target
+        self.n_words = n_words
         self._resize(self._slots)
 
     def growth_bytes(self, more: int) -> int:
@@ -359,7 +609,6 @@ class KeyStore:
         content: npt.NDArray[np.integer],
         which: IntArray,
         cand: npt.NDArray[np.uint64],
-        stored: npt.NDArray[np.uint64],
     ) -> BoolArray:
         """Whether the slots with ``content`` hold the key of candidates ``which``
         (a positive content refers to ``stored``, a negative one to ``cand``)."""
@@ -368,18 +617,22 @@ class KeyStore:
         ref = content.take(full).astype(np.int64)
         if ref.size and int(ref.min()) > 0:  # the usual case: stored states only
             ref -= 1
-            out[full] = _same(stored.take(ref, axis=0), cand.take(which.take(full), axis=0))
+            out[full] = _same(self._stored(ref), cand.take(which.take(full), axis=0))
             return out
         old = ref > 0
         if old.any():
             at = full.compress(old)
             ref_old = ref.compress(old) - 1
-            out[at] = _same(stored.take(ref_old, axis=0), cand.take(which.take(at), axis=0))
+            out[at] = _same(self._stored(ref_old), cand.take(which.take(at), axis=0))
         if not old.all():
             at = full.compress(~old)
             ref_new = -1 - ref.compress(~old)
             out[at] = _same(cand.take(ref_new, axis=0), cand.take(which.take(at), axis=0))
         return out
+
+    def _stored(self, ids: IntArray) -> npt.NDArray[np.uint64]:
+        """Stored keys ``ids`` in `_flat` form."""
+        return self._keys.take_flat(ids) if self.n_words == 1 else self._keys.take(ids)
 
     def _resize(self, slots: int) -> None:
         """A table of ``slots`` slots, rebuilt from the stored keys a chunk at a time
@@ -387,7 +640,7 @@ class KeyStore:
         self._index[:] = EMPTY  # pages already touched; the rest of a buffer is still zero
         self._use_table(slots)
         for start in range(0, self.size, FILL_CHUNK):
-            part = self.keys[start : start + FILL_CHUNK]
+            part = self._keys.words(start, start + FILL_CHUNK)
             ids = np.arange(start, start + part.shape[0], dtype=np.int64)
             self._place(self._home(part), ids)
 
@@ -471,7 +724,6 @@ class KeyStore:
         slots: IntArray,
         which: IntArray,
         cand: npt.NDArray[np.uint64],
-        stored: npt.NDArray[np.uint64],
     ) -> tuple[BoolArray, BoolArray, IntArray]:
         """One probing round from ``slots`` for candidates ``which``: per candidate,
         whether it found its key, whether it found a free slot (never both), and that
@@ -480,12 +732,12 @@ class KeyStore:
         (less work per candidate)."""
         if slots.size > PROBE_WINDOW_BELOW:
             content = self._index.take(slots)
-            return self._matches(content, which, cand, stored), content == EMPTY, slots
+            return self._matches(content, which, cand), content == EMPTY, slots
         window = slots[:, None] + _WINDOW
         self._wrap(window)
         contents = self._index.take(window)
         wide = np.repeat(which, _WINDOW.size)
-        hits = self._matches(contents.reshape(-1), wide, cand, stored).reshape(contents.shape)
+        hits = self._matches(contents.reshape(-1), wide, cand).reshape(contents.shape)
         stops = contents == EMPTY
         stops |= hits
         first = stops.argmax(axis=1)
@@ -508,12 +760,12 @@ class KeyStore:
     def find(self, cand: KeyArray) -> IntArray:
         """State number of each candidate key, ``-1`` if it is not stored."""
         cand = np.ascontiguousarray(cand)
-        flat, stored = self._flat(cand), self._flat(self.keys)
+        flat = self._flat(cand)
         slots = self._home(cand)
         out = np.full(cand.shape[0], -1, dtype=np.int64)
         pos = np.arange(cand.shape[0], dtype=np.int64)
         while pos.size:
-            hit, free, at = self._probe(slots, pos, flat, stored)
+            hit, free, at = self._probe(slots, pos, flat)
             where = np.flatnonzero(hit)
             out[pos.take(where)] = self._index.take(at.take(where)).astype(np.int64) - 1
             stopped = hit | free
@@ -568,14 +820,14 @@ class KeyStore:
         occurrence of every new key becomes a new state. Returns the positions of those
         first occurrences (ascending) and, if asked, every candidate's state number."""
         m = cand.shape[0]
-        flat, stored = self._flat(cand), self._flat(self.keys)
+        flat = self._flat(cand)
         slots = self._home(cand)
         index = self._index
         final = np.empty(m, dtype=np.int64) if want_ids else None
         pos = np.arange(m, dtype=np.int64)
         claimed: list[IntArray] = []
         while True:
-            done, empty, at = self._probe(slots, pos, flat, stored)
+            done, empty, at = self._probe(slots, pos, flat)
             stopped = done | empty
             free = np.flatnonzero(empty)
             if free.size:
