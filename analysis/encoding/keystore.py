@@ -5,7 +5,6 @@ Part of `analysis.encoding`; see its docstring for how the pieces fit."""
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -248,90 +247,73 @@ def _reserved(shape: tuple[int, ...], dtype: npt.DTypeLike) -> npt.NDArray[Any]:
         return np.zeros((min(rows, 1 << 12), *shape[1:]), dtype=dtype)
 
 
-_PAD = 16
-"""Bytes past the last row of a `PackedRows` buffer: the two aligned words read for the
-last row's last word stay inside the buffer."""
-
-_S3, _S63 = np.uint64(3), np.uint64(63)
+_PLANES: dict[int, tuple[int, ...]] = {
+    1: (1,),
+    2: (2,),
+    3: (2, 1),
+    4: (4,),
+    5: (4, 1),
+    6: (4, 2),
+    7: (4, 2, 1),
+    8: (8,),
+}
+"""How a word's used bytes are split into aligned planes of 1, 2, 4 or 8 bytes."""
 
 
 class PackedRows:
     """Keys of ``len(word_bytes)`` words, each stored in only its low ``word_bytes[w]``
-    bytes (the bytes its fields use; the others are always zero), rows back to back.
+    bytes (the bytes its fields use; the others are always zero).
 
-    A one-word key of 37 bits takes 5 bytes instead of 8. A range of rows is read
-    through a strided ``uint64`` view per word (it starts at the word's offset in the
-    row and steps by the row's bytes; it reads the bytes after the word too, which a
-    mask clears). A gather of scattered rows reads, per word, the two aligned words
-    of the buffer that hold its bytes and shifts them together (numpy's ``take``
-    would first copy a whole unaligned view, and its fancy indexing of one runs at a
-    third of the speed). With whole words the rows are a plain ``(rows, words)``
-    array. The buffer is reserved like `Growable`'s (zeroed memory, address space
-    until written) and grows by `GROWTH` past the reservation. Bytes are read
-    little-endian; a big-endian machine keeps whole words.
+    A one-word key of 37 bits takes 5 bytes instead of 8: a ``uint32`` plane for its
+    low 4 bytes and a ``uint8`` plane for the fifth. Every plane is a contiguous,
+    aligned array, so a gather is one ``take`` per plane (numpy's ``take`` would first
+    copy a whole unaligned strided view, and its fancy indexing of one runs at a third
+    of the speed) and a range of rows a slice per plane; the word is the planes
+    shifted together. With whole words the rows are one ``(rows, words)`` array, as
+    before. Planes are reserved like `Growable`'s (zeroed memory, address space until
+    written) and grow by `GROWTH` past the reservation.
     """
 
     def __init__(self, word_bytes: Sequence[int], reserve: int) -> None:
         self.word_bytes = tuple(int(b) for b in word_bytes)
         if not self.word_bytes or not all(1 <= b <= 8 for b in self.word_bytes):
             raise ValueError(f"PackedRows: word bytes must be 1..8, got {self.word_bytes}")
-        if sys.byteorder != "little":
-            self.word_bytes = (8,) * len(self.word_bytes)
         self.n_words = len(self.word_bytes)
         self.row_bytes = sum(self.word_bytes)
-        self.offsets = np.cumsum((0, *self.word_bytes[:-1])).tolist()
         self.whole = self.row_bytes == 8 * self.n_words
         self.masks = [np.uint64((1 << (8 * b)) - 1) for b in self.word_bytes]
         self.size = 0
-        self._attach(_reserved((self._buffer_words(max(1, reserve)),), np.uint64))
-
-    def _buffer_words(self, rows: int) -> int:
-        """Words of a buffer for ``rows`` rows."""
-        return -(-(rows * self.row_bytes + _PAD) // 8)
-
-    def _attach(self, buffer: npt.NDArray[np.uint64]) -> None:
-        """Use ``buffer`` as the storage and make the views over it."""
-        self._buffer = buffer
-        data = buffer.view(np.uint8)
-        self._data = data
-        rows = (data.size - _PAD) // self.row_bytes
-        self._rows = rows
+        reserve = max(1, reserve)
         if self.whole:
-            whole: KeyArray = data[: rows * self.row_bytes].view(np.uint64)
-            self._whole = whole.reshape(rows, self.n_words)
+            self._whole = Growable((self.n_words,), np.uint64, reserve)
             return
-        self._views = [
-            np.ndarray((rows,), dtype="<u8", buffer=data, offset=o, strides=(self.row_bytes,))
-            for o in self.offsets
-        ]
+        # per word: (plane, bit shift of the plane inside the word)
+        self._planes: list[list[tuple[Growable, np.uint64]]] = []
+        for b in self.word_bytes:
+            planes, shift = [], 0
+            for size in _PLANES[b]:
+                dtype = np.dtype(f"u{size}")
+                planes.append((Growable((), dtype, reserve), np.uint64(shift)))
+                shift += 8 * size
+            self._planes.append(planes)
 
     @property
     def capacity(self) -> int:
         """Rows that fit without copying."""
-        return self._rows
+        if self.whole:
+            return self._whole.capacity
+        return min(p.capacity for planes in self._planes for p, _ in planes)
 
     @property
     def nbytes(self) -> int:
         """Bytes of the rows written."""
         return self.size * self.row_bytes
 
-    def _grown_rows(self, rows: int) -> int:
-        return max(rows, int(self._rows * GROWTH) + 1)
-
     def growth_bytes(self, rows: int) -> int:
-        """As `Growable.growth_bytes`."""
-        end = self.size + rows
-        if end <= self._rows:
-            return rows * self.row_bytes
-        return self._grown_rows(end) * self.row_bytes
-
-    def ensure(self, rows: int) -> None:
-        """Room for ``rows`` rows (copies only past the reservation, by `GROWTH`)."""
-        if rows > self._rows:
-            grown = np.zeros(self._buffer_words(self._grown_rows(rows)), dtype=np.uint64)
-            used = self.size * self.row_bytes
-            grown.view(np.uint8)[:used] = self._data[:used]
-            self._attach(grown)
+        """As `Growable.growth_bytes`, over all planes."""
+        if self.whole:
+            return self._whole.growth_bytes(rows)
+        return sum(p.growth_bytes(rows) for planes in self._planes for p, _ in planes)
 
     def put(self, start: int, words: KeyArray) -> None:
         """Write ``words`` (shape ``(m, n_words)``) as rows ``start ...`` (within
@@ -339,81 +321,65 @@ class PackedRows:
         beyond its ``word_bytes`` (the layout promised they are zero)."""
         m = words.shape[0]
         end = start + m
-        self.ensure(end)
         if self.whole:
-            self._whole[start:end] = words
-        else:
-            for w, mask in enumerate(self.masks):
-                if (words[:, w] & ~mask).any():
-                    raise ValueError(
-                        f"PackedRows: a key uses more than {self.word_bytes[w]} bytes of word {w}"
-                    )
-            raw = (
-                np.ascontiguousarray(words, dtype="<u8").view(np.uint8).reshape(m, 8 * self.n_words)
-            )
-            rows = self._data[start * self.row_bytes : end * self.row_bytes].reshape(
-                m, self.row_bytes
-            )
-            for w, (o, b) in enumerate(zip(self.offsets, self.word_bytes, strict=True)):
-                rows[:, o : o + b] = raw[:, 8 * w : 8 * w + b]
+            self._whole.ensure(end)
+            self._whole.size = max(self._whole.size, end)
+            self._whole.view[start:end] = words
+            self.size = max(self.size, end)
+            return
+        for w, planes in enumerate(self._planes):
+            word = words[:, w]
+            if (word & ~self.masks[w]).any():
+                raise ValueError(
+                    f"PackedRows: a key uses more than {self.word_bytes[w]} bytes of word {w}"
+                )
+            for plane, shift in planes:
+                plane.ensure(end)
+                plane.size = max(plane.size, end)
+                part = word >> shift if shift else word
+                plane.view[start:end] = part.astype(plane.view.dtype)  # keeps the low bytes
         self.size = max(self.size, end)
 
     def append(self, words: KeyArray) -> None:
         """Add ``words`` as the next rows."""
         self.put(self.size, words)
 
+    def _joined(self, parts: list[tuple[npt.NDArray[Any], np.uint64]]) -> KeyArray:
+        """One word from its planes' values."""
+        first, _ = parts[0]
+        word: KeyArray = first.astype(np.uint64)
+        for value, shift in parts[1:]:
+            word |= np.left_shift(value, shift, dtype=np.uint64)
+        return word
+
     def words(self, start: int, stop: int) -> KeyArray:
         """Rows ``start .. stop - 1`` as words ``(m, n_words)`` (a view with whole
         words: do not write to it)."""
         stop = min(max(start, stop), self.size)
         if self.whole:
-            view: KeyArray = self._whole[start:stop]
+            view: KeyArray = self._whole.view[start:stop]
             return view
         out = np.empty((stop - start, self.n_words), dtype=np.uint64)
-        for w, view_w in enumerate(self._views):
-            np.bitwise_and(view_w[start:stop], self.masks[w], out=out[:, w])
+        for w, planes in enumerate(self._planes):
+            out[:, w] = self._joined([(p.view[start:stop], s) for p, s in planes])
         return out
 
     def take(self, ids: IntArray) -> KeyArray:
         """Rows ``ids`` as words ``(len(ids), n_words)``."""
         if self.whole:
-            rows: KeyArray = self._whole.take(ids, axis=0)
+            rows: KeyArray = self._whole.view.take(ids, axis=0)
             return rows
-        if self.n_words == 1:
-            return self.take_flat(ids)[:, None]
         out = np.empty((ids.size, self.n_words), dtype=np.uint64)
-        for w in range(self.n_words):
-            out[:, w] = self._gather(ids, w)
+        for w, planes in enumerate(self._planes):
+            out[:, w] = self._joined([(p.view.take(ids), s) for p, s in planes])
         return out
-
-    def _gather(self, ids: IntArray, w: int) -> KeyArray:
-        """Word ``w`` of rows ``ids``: the aligned buffer words ``q`` and ``q + 1``
-        hold its bytes from bit ``r`` of ``q`` on; ``(lo >> r) | (hi << (64 - r))``
-        joins them (the left shift done as ``1`` then ``63 - r``, so ``r = 0`` shifts
-        ``hi`` out entirely), and the mask clears the bytes of what follows."""
-        byte = np.multiply(ids, self.row_bytes, dtype=np.int64)
-        if self.offsets[w]:
-            byte += self.offsets[w]
-        q = byte >> 3
-        r = (byte & 7).view(np.uint64)
-        r <<= _S3
-        low = self._buffer.take(q)
-        q += 1
-        high = self._buffer.take(q)
-        low >>= r
-        high <<= _S1
-        r ^= _S63
-        high <<= r
-        low |= high
-        low &= self.masks[w]
-        return low
 
     def take_flat(self, ids: IntArray) -> KeyArray:
         """`take` of one-word rows as a 1-D array."""
         if self.whole:
-            flat: KeyArray = self._whole[:, 0].take(ids)
+            flat: KeyArray = self._whole.view[:, 0].take(ids)
             return flat
-        return self._gather(ids, 0)
+        return self._joined([(p.view.take(ids), s) for p, s in self._planes[0]])
 
 
 class KeyView:
