@@ -5,6 +5,7 @@ Part of `analysis.encoding`; see its docstring for how the pieces fit."""
 
 from __future__ import annotations
 
+import mmap
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -236,11 +237,26 @@ RESERVE_BYTES = 1 << 30
 rows), so a reservation never approaches what the kernel would refuse."""
 
 
+MAPPED_BYTES = 1 << 20
+"""Reservations from this size on are anonymous memory maps of their own."""
+
+
 def _reserved(shape: tuple[int, ...], dtype: npt.DTypeLike) -> npt.NDArray[Any]:
     """Zeroed memory for up to ``shape[0]`` rows, fewer past `RESERVE_BYTES` or when the
     address space is refused (callers grow past it anyway)."""
     row = max(1, int(np.prod(shape[1:], dtype=np.int64)) * np.dtype(dtype).itemsize)
     rows = max(1, min(shape[0], RESERVE_BYTES // row))
+    if rows * row >= MAPPED_BYTES:
+        try:
+            # Pages of its own, returned to the kernel when the array is freed: a block
+            # from the C heap (glibc serves blocks below its mmap threshold, up to 32 MB,
+            # from there) would be zeroed by writing it when it reuses freed memory,
+            # making the whole reservation resident at once.
+            mapped = mmap.mmap(-1, rows * row)
+            flat = np.frombuffer(mapped, dtype=np.uint8)
+            return flat.view(dtype).reshape((rows, *shape[1:]))
+        except (OSError, ValueError, MemoryError):
+            pass
     try:
         return np.zeros((rows, *shape[1:]), dtype=dtype)
     except MemoryError:
