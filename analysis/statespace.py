@@ -29,15 +29,16 @@ Counts are exact: packed keys are injective on reachable markings, multi-word ke
 are compared in full, ``edges`` counts (marking, enabled transition)
 pairs, and a count field that some firing would overflow is widened (every stored key
 is re-packed) before any successor using it is trusted; past ``2**60`` tokens
-exploration stops with a reason. Each state keeps the transition that found it
-(one byte below 256 transitions, two below 65,536) and no parent number: `StateSpace.trace_to` un-fires that
-transition on the key and looks the parent up in the store, one layer up at a time, so
-it returns a shortest firing sequence (sleep sets keep every state at its BFS depth).
+exploration stops with a reason. Each state keeps the transition that found it (one
+byte below 256 transitions, two below 65,536) and no parent number:
+`StateSpace.trace_to` un-fires that transition on the key and looks the parent up in
+the store, one layer up at a time, so it returns a shortest firing sequence (sleep sets
+keep every state at its BFS depth).
 
 Memory per stored state: the bytes of the key its fields reach (``Layout.word_bytes``:
 4 of Referendum-PT-0015's 30 bits, 5 of Peterson-PT-3's 34; at most ``8 * W``), 1 or 2
 bytes of transition, and 6.7 to 10 bytes of hash table (a 4-byte state number per slot,
-load 0.4 to 0.6, see `KeyStore`): about 12 to 19 bytes for one-word nets.
+load 0.4 to 0.6, see `KeyStore`): about 12 to 20 bytes for one-word nets.
 
 Typical use::
 

@@ -361,9 +361,11 @@ class PackedRows:
         self.put(self.size, words)
 
     def _joined(self, parts: list[tuple[npt.NDArray[Any], np.uint64]]) -> KeyArray:
-        """One word from its planes' values."""
+        """One word from its planes' values. A ``uint64`` plane is a word's only one,
+        so it is returned as is (no copy, never written); a narrower first plane is
+        copied into the word the others are OR-ed into."""
         first, _ = parts[0]
-        word: KeyArray = first.astype(np.uint64)
+        word: KeyArray = first.astype(np.uint64, copy=False)
         for value, shift in parts[1:]:
             word |= np.left_shift(value, shift, dtype=np.uint64)
         return word
