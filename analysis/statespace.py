@@ -35,8 +35,9 @@ byte below 256 transitions, two below 65,536) and no parent number:
 the store, one layer up at a time, so it returns a shortest firing sequence (sleep sets
 keep every state at its BFS depth).
 
-Memory per stored state: the bytes of the key its fields reach (``Layout.word_bytes``:
-4 of Referendum-PT-0015's 30 bits, 5 of Peterson-PT-3's 34; at most ``8 * W``), 1 or 2
+Memory per stored state: the bytes of a one-word key its fields reach
+(``Layout.word_bytes``: 4 of Referendum-PT-0015's 30 bits, 5 of Peterson-PT-3's 34;
+``8 * W`` for keys of ``W > 1`` words, see `_stored_bytes`), 1 or 2
 bytes of transition, and 6.7 to 10 bytes of hash table (a 4-byte state number per slot,
 load 0.4 to 0.6, see `KeyStore`): about 12 to 20 bytes for one-word nets.
 
@@ -321,6 +322,9 @@ positions, probe results), beside its key and its successor's column."""
 
 BLOCK_TEMPORARIES = 64 << 20
 """Bytes of temporaries a block-wise pass over the store (a re-packing) may hold."""
+
+PACK_WIDE_KEYS = False
+"""Whether keys of several words are stored byte-granular too (see `_stored_bytes`)."""
 
 DENSE_DELTA_CELLS = 1 << 24
 """Largest places x transitions for a dense effect matrix (successor columns by one
@@ -761,7 +765,7 @@ class _Explorer:
             self.layout.n_words,
             wide_index=not small,
             reserve=self.reserve,
-            word_bytes=self.layout.word_bytes,
+            word_bytes=_stored_bytes(self.layout),
         )
         self.via = Growable((), self.via_type, self.reserve)
         self.via.append(np.zeros(1, dtype=self.via_type))
@@ -1026,13 +1030,12 @@ class _Explorer:
             raise BudgetExceeded(self.stopped)
         # A block at a time, in place when the rows keep their bytes: never a second
         # copy of the store as words.
-        new_row = sum(layout.word_bytes)
+        stored = _stored_bytes(layout)
+        new_row = sum(stored)
         fresh = 0 if new_row == sum(self.store.word_bytes) else self.store.size * new_row
         self.guard(BLOCK_TEMPORARIES, fresh)
         old = self.layout
-        self.store.repack(
-            lambda block: old.repack(block, layout), layout.n_words, layout.word_bytes
-        )
+        self.store.repack(lambda block: old.repack(block, layout), layout.n_words, stored)
         self._set_layout(layout)
         for i, block in enumerate(blocks):
             blocks[i] = block.astype(self.dtype)
@@ -1472,6 +1475,17 @@ class _Explorer:
         """`guard` before storing up to ``candidates`` successors (`insert_bytes`)."""
         self.guard(*self.insert_bytes(candidates))
         self.offered += candidates
+
+
+def _stored_bytes(layout: Layout) -> tuple[int, ...]:
+    """Bytes the store keeps of each key word: only those the fields reach for one-word
+    keys, whole words otherwise. Multi-word keys in planes cost a gather per plane on
+    every probe where whole words cost one per key: on FMS-PT-00005 (8 + 2 bytes) 20 %
+    more CPU for 6 bytes less per state, and its resident memory stays above 25 B
+    either way (`PACK_WIDE_KEYS` turns it on)."""
+    if layout.n_words == 1 or PACK_WIDE_KEYS:
+        return layout.word_bytes
+    return (8,) * layout.n_words
 
 
 def _via_type(n_transitions: int) -> type[np.unsignedinteger]:

@@ -9,9 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from analysis import statespace
 from analysis.encoding import KeyArray, KeyStore, PackedRows
 from analysis.statespace import explore
 from coral_lang.net import Net
+from tests.analysis.nets import make_net, replay
 from tests.analysis.strategies import small_nets
 
 
@@ -73,10 +75,51 @@ def test_store_on_packed_rows_finds_every_key_and_repacks_to_other_bytes() -> No
 @given(small_nets(max_initial=3))
 def test_explorer_stores_the_bytes_its_layout_reaches(net: Net) -> None:
     space = explore(net, max_states=500)
-    assert space.store.word_bytes == space.layout.word_bytes
+    n_words = space.layout.n_words
+    expected = space.layout.word_bytes if n_words == 1 else (8,) * n_words
+    assert space.store.word_bytes == expected
     words = space.keys[:]
     assert all(
         int(w).bit_length() <= 8 * b
         for row in words.tolist()
         for w, b in zip(row, space.layout.word_bytes, strict=True)
     )
+
+
+@settings(max_examples=10, deadline=None, derandomize=True)
+@given(small_nets(max_initial=3))
+def test_wide_keys_packed_give_the_same_state_space(net: Net) -> None:
+    plain = explore(net, max_states=500)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(statespace, "PACK_WIDE_KEYS", True)
+        packed = explore(net, max_states=500)
+    assert packed.store.word_bytes == packed.layout.word_bytes
+    assert (packed.states, packed.edges) == (plain.states, plain.edges)
+    assert packed.deadlocks.tolist() == plain.deadlocks.tolist()
+    assert np.array_equal(packed.keys[:], plain.keys[:])
+    last = packed.states - 1
+    assert packed.trace_to(last) == plain.trace_to(last)
+
+
+def test_wide_keys_packed_agree_on_a_net_of_several_words() -> None:
+    big = 1 << 40  # four counts of 41 bits: a key of several words
+    net = make_net(
+        "wide",
+        {"fuel": 50, "a": big, "b": big, "c": big, "d": big},
+        {
+            "ab": ({"fuel": 1, "a": 1}, {"b": 1}),
+            "cd": ({"fuel": 1, "c": 1}, {"d": 1}),
+        },
+    )
+    plain = explore(net)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(statespace, "PACK_WIDE_KEYS", True)
+        packed = explore(net)
+    assert packed.layout.n_words > 1 and sum(packed.store.word_bytes) < 8 * packed.layout.n_words
+    assert plain.store.word_bytes == (8,) * plain.layout.n_words
+    assert (packed.states, packed.edges) == (plain.states, plain.edges) == (51 * 52 // 2, 2550)
+    assert np.array_equal(packed.keys[:], plain.keys[:])
+    for index in (0, 700, packed.states - 1):
+        trace = packed.trace_to(index)
+        assert replay(net, trace) == packed.marking(index) == plain.marking(index)
+        assert len(trace) == packed.depth_of(index)
