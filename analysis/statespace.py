@@ -29,14 +29,17 @@ Counts are exact: packed keys are injective on reachable markings, multi-word ke
 are compared in full, ``edges`` counts (marking, enabled transition)
 pairs, and a count field that some firing would overflow is widened (every stored key
 is re-packed) before any successor using it is trusted; past ``2**60`` tokens
-exploration stops with a reason. Each state keeps the transition that found it
-(``int16`` for usual nets) and no parent number: `StateSpace.trace_to` un-fires that
-transition on the key and looks the parent up in the store, one layer up at a time, so
-it returns a shortest firing sequence (sleep sets keep every state at its BFS depth).
+exploration stops with a reason. Each state keeps the transition that found it (one
+byte below 256 transitions, two below 65,536) and no parent number:
+`StateSpace.trace_to` un-fires that transition on the key and looks the parent up in
+the store, one layer up at a time, so it returns a shortest firing sequence (sleep sets
+keep every state at its BFS depth).
 
-Memory per stored state: ``8 * W`` bytes of key (``W`` = words per marking), 2 bytes of
-transition, and 6.7 to 10 bytes of hash table (a 4-byte state number per slot, load 0.4
-to 0.6, see `KeyStore`): about 17 to 20 bytes for one-word nets.
+Memory per stored state: the bytes of a one-word key its fields reach
+(``Layout.word_bytes``: 4 of Referendum-PT-0015's 30 bits, 5 of Peterson-PT-3's 34;
+``8 * W`` for keys of ``W > 1`` words, see `_stored_bytes`), 1 or 2
+bytes of transition, and 6.7 to 10 bytes of hash table (a 4-byte state number per slot,
+load 0.4 to 0.6, see `KeyStore`): about 12 to 20 bytes for one-word nets.
 
 Typical use::
 
@@ -49,6 +52,7 @@ Typical use::
 from __future__ import annotations
 
 import ctypes
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import cast
@@ -73,6 +77,7 @@ from analysis.encoding import (
     FieldNet,
     Growable,
     KeyStore,
+    KeyView,
     Layout,
     one_hot_components,
     row_dtype,
@@ -149,7 +154,7 @@ class StateSpace:
     depth: int
     reduced: bool
     layout: Layout = field(repr=False)
-    keys: npt.NDArray[np.uint64] = field(repr=False)
+    keys: KeyView = field(repr=False)
     store: KeyStore = field(repr=False)
     key_delta: npt.NDArray[np.uint64] = field(repr=False)
     via: npt.NDArray[np.integer] = field(repr=False)
@@ -193,7 +198,7 @@ class StateSpace:
         Decodes all keys at once (``8 * places`` bytes per state); use
         `iter_markings` or `find` on big state spaces.
         """
-        return self.layout.unpack(self.keys).astype(np.int64)
+        return self.layout.unpack(self.keys[:]).astype(np.int64)
 
     def iter_markings(self, chunk: int = 1 << 16) -> Iterator[tuple[int, Markings]]:
         """``(first_state, markings)`` blocks of at most ``chunk`` states, in order (fewer
@@ -318,6 +323,9 @@ positions, probe results), beside its key and its successor's column."""
 BLOCK_TEMPORARIES = 64 << 20
 """Bytes of temporaries a block-wise pass over the store (a re-packing) may hold."""
 
+PACK_WIDE_KEYS = False
+"""Whether keys of several words are stored byte-granular too (see `_stored_bytes`)."""
+
 DENSE_DELTA_CELLS = 1 << 24
 """Largest places x transitions for a dense effect matrix (successor columns by one
 gather); larger nets add their sparse effects instead."""
@@ -437,6 +445,31 @@ class SleepSets:
             out |= sleep.take(rep_s, axis=0)
         out &= self.independent.take(rep_t, axis=0)
         return out
+
+
+class _RowQueue:
+    """Rows of a list of arrays read front to back, ``take(n)`` at a time; an array is
+    forgotten once its last row is read, so its memory goes back to the allocator
+    while the reader is still busy with the others."""
+
+    def __init__(self, pieces: list[npt.NDArray[np.uint64]]) -> None:
+        self._pieces = deque(pieces)
+        self._offset = 0  # rows of the first piece already read
+
+    def take(self, n: int) -> npt.NDArray[np.uint64]:
+        """The next ``n`` rows (fewer only when none are left)."""
+        parts: list[npt.NDArray[np.uint64]] = []
+        while n > 0 and self._pieces:
+            piece = self._pieces[0]
+            rows = min(n, piece.shape[0] - self._offset)
+            parts.append(piece[self._offset : self._offset + rows])
+            self._offset += rows
+            n -= rows
+            if self._offset == piece.shape[0]:
+                self._pieces.popleft()
+                self._offset = 0
+        assert parts, "a layer's sleep sets cover its states"
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
 class _Round:
@@ -711,7 +744,7 @@ class _Explorer:
         self.start = budget.clock()
         small = max_states is not None and max_states < np.iinfo(np.int32).max // 2
         self.index_type = np.int32 if small else np.int64
-        self.via_type = np.int16 if cn.n_transitions < np.iinfo(np.int16).max else np.int32
+        self.via_type = _via_type(cn.n_transitions)
         layout = Layout.initial_guess(cn, one_hot_components(cn, budget))
         self.fnet = fnet = FieldNet(cn, layout)
         self.index = _EnablingIndex(fnet, layout, cn.n_transitions)
@@ -728,7 +761,12 @@ class _Explorer:
         self._set_layout(layout)
         self.widenings = np.zeros(cn.n_places, dtype=np.int64)  # per place
         self.reserve = min(max_states or DEFAULT_RESERVE, RESERVE_LIMIT)
-        self.store = KeyStore(self.layout.n_words, wide_index=not small, reserve=self.reserve)
+        self.store = KeyStore(
+            self.layout.n_words,
+            wide_index=not small,
+            reserve=self.reserve,
+            word_bytes=_stored_bytes(self.layout),
+        )
         self.via = Growable((), self.via_type, self.reserve)
         self.via.append(np.zeros(1, dtype=self.via_type))
         self.dead: list[npt.NDArray[np.int64]] = []
@@ -990,16 +1028,15 @@ class _Explorer:
                 " explorer counts exactly (the net may be unbounded)"
             )
             raise BudgetExceeded(self.stopped)
-        keys = self.store.keys
-        if layout.n_words == self.layout.n_words:
-            # In place, a block at a time: no second copy of the store.
-            self.guard(BLOCK_TEMPORARIES)
-            packed = self.layout.repack(keys, layout, out=keys)
-        else:
-            self.guard(BLOCK_TEMPORARIES, keys.shape[0] * 8 * layout.n_words)
-            packed = self.layout.repack(keys, layout)
+        # A block at a time, in place when the rows keep their bytes: never a second
+        # copy of the store as words.
+        stored = _stored_bytes(layout)
+        new_row = sum(stored)
+        fresh = 0 if new_row == sum(self.store.word_bytes) else self.store.size * new_row
+        self.guard(BLOCK_TEMPORARIES, fresh)
+        old = self.layout
+        self.store.repack(lambda block: old.repack(block, layout), layout.n_words, stored)
         self._set_layout(layout)
-        self.store.rekey(packed)
         for i, block in enumerate(blocks):
             blocks[i] = block.astype(self.dtype)
 
@@ -1239,14 +1276,18 @@ class _Explorer:
                 continue
             self.next_sleep = []
             self.sleep_next = self.sleep is not None and self.edges >= SLEEP_MIN_DEGREE * base
-            sleep_all = None if not sleeps else np.concatenate(sleeps)
+            # Each block takes its sleep sets off the front of the layer's pieces, which
+            # are dropped as they are used up: a wide layer's sleep sets (8 bytes per
+            # tracked 64 transitions per state) are never held twice, and they shrink
+            # as the next layer's grow.
+            sleep_all = None if not sleeps else _RowQueue(sleeps)
             sleeps = None
             c = 0
             while c < width:
                 size = min(self.block_size(), width - c)
                 self.guard(size * self.fnet.n_fields * (self.dtype.itemsize + 8))
                 cols = self.frontier(base + c, size)
-                part = None if sleep_all is None else sleep_all[c : c + size]
+                part = None if sleep_all is None else sleep_all.take(size)
                 self.step(cols, part, base + c, [])
                 if self.stopped:
                     raise BudgetExceeded(self.stopped)
@@ -1434,6 +1475,27 @@ class _Explorer:
         """`guard` before storing up to ``candidates`` successors (`insert_bytes`)."""
         self.guard(*self.insert_bytes(candidates))
         self.offered += candidates
+
+
+def _stored_bytes(layout: Layout) -> tuple[int, ...]:
+    """Bytes the store keeps of each key word: only those the fields reach for one-word
+    keys, whole words otherwise. Multi-word keys in planes cost a gather per plane on
+    every probe where whole words cost one per key: on FMS-PT-00005 (8 + 2 bytes) 20 %
+    more CPU for 6 bytes less per state, and its resident memory stays above 25 B
+    either way (`PACK_WIDE_KEYS` turns it on)."""
+    if layout.n_words == 1 or PACK_WIDE_KEYS:
+        return layout.word_bytes
+    return (8,) * layout.n_words
+
+
+def _via_type(n_transitions: int) -> type[np.unsignedinteger]:
+    """The narrowest unsigned type that numbers ``n_transitions`` transitions: the
+    arriving transition is kept for every state, so one byte instead of two is a byte
+    per state on the many nets with fewer than 256 transitions."""
+    for candidate in (np.uint8, np.uint16):
+        if n_transitions <= np.iinfo(candidate).max:
+            return candidate
+    return np.uint32
 
 
 def _unsigned(dtype: np.dtype[np.integer]) -> np.dtype[np.unsignedinteger]:
@@ -1680,7 +1742,7 @@ def _explore_with_inputs(
             complete=True,
             stopped_reason=None,
             depth=1,
-            keys=space.keys[:1],
+            keys=space.keys,
             via=space.via[:1],
             layer_starts=np.zeros(1, dtype=np.int64),
         )

@@ -57,6 +57,8 @@ from analysis.encoding.keystore import (
     Added,
     Growable,
     KeyStore,
+    KeyView,
+    PackedRows,
     first_occurrences,
     word_multipliers,
 )
@@ -90,7 +92,9 @@ __all__ = [
     "IntArray",
     "KeyArray",
     "KeyStore",
+    "KeyView",
     "Layout",
+    "PackedRows",
     "PresetGroup",
     "first_occurrences",
     "one_hot_components",

@@ -5,6 +5,8 @@ Part of `analysis.encoding`; see its docstring for how the pieces fit."""
 
 from __future__ import annotations
 
+import mmap
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -235,15 +237,221 @@ RESERVE_BYTES = 1 << 30
 rows), so a reservation never approaches what the kernel would refuse."""
 
 
+MAPPED_BYTES = 1 << 20
+"""Reservations from this size on are anonymous memory maps of their own."""
+
+
 def _reserved(shape: tuple[int, ...], dtype: npt.DTypeLike) -> npt.NDArray[Any]:
     """Zeroed memory for up to ``shape[0]`` rows, fewer past `RESERVE_BYTES` or when the
     address space is refused (callers grow past it anyway)."""
     row = max(1, int(np.prod(shape[1:], dtype=np.int64)) * np.dtype(dtype).itemsize)
     rows = max(1, min(shape[0], RESERVE_BYTES // row))
+    if rows * row >= MAPPED_BYTES:
+        try:
+            # Pages of its own, returned to the kernel when the array is freed: a block
+            # from the C heap (glibc serves blocks below its mmap threshold, up to 32 MB,
+            # from there) would be zeroed by writing it when it reuses freed memory,
+            # making the whole reservation resident at once.
+            mapped = mmap.mmap(-1, rows * row)
+            flat = np.frombuffer(mapped, dtype=np.uint8)
+            return flat.view(dtype).reshape((rows, *shape[1:]))
+        except (OSError, ValueError, MemoryError):
+            pass
     try:
         return np.zeros((rows, *shape[1:]), dtype=dtype)
     except MemoryError:
         return np.zeros((min(rows, 1 << 12), *shape[1:]), dtype=dtype)
+
+
+_PLANES: dict[int, tuple[int, ...]] = {
+    1: (1,),
+    2: (2,),
+    3: (2, 1),
+    4: (4,),
+    5: (4, 1),
+    6: (4, 2),
+    7: (4, 2, 1),
+    8: (8,),
+}
+"""How a word's used bytes are split into aligned planes of 1, 2, 4 or 8 bytes."""
+
+
+class PackedRows:
+    """Keys of ``len(word_bytes)`` words, each stored in only its low ``word_bytes[w]``
+    bytes (the bytes its fields use; the others are always zero).
+
+    A one-word key of 37 bits takes 5 bytes instead of 8: a ``uint32`` plane for its
+    low 4 bytes and a ``uint8`` plane for the fifth. Every plane is a contiguous,
+    aligned array, so a gather is one ``take`` per plane (numpy's ``take`` would first
+    copy a whole unaligned strided view, and its fancy indexing of one runs at a third
+    of the speed) and a range of rows a slice per plane; the word is the planes
+    shifted together. With whole words the rows are one ``(rows, words)`` array, as
+    before. Planes are reserved like `Growable`'s (zeroed memory, address space until
+    written) and grow by `GROWTH` past the reservation.
+    """
+
+    def __init__(self, word_bytes: Sequence[int], reserve: int) -> None:
+        self.word_bytes = tuple(int(b) for b in word_bytes)
+        if not self.word_bytes or not all(1 <= b <= 8 for b in self.word_bytes):
+            raise ValueError(f"PackedRows: word bytes must be 1..8, got {self.word_bytes}")
+        self.n_words = len(self.word_bytes)
+        self.row_bytes = sum(self.word_bytes)
+        self.whole = self.row_bytes == 8 * self.n_words
+        self.masks = [np.uint64((1 << (8 * b)) - 1) for b in self.word_bytes]
+        self.size = 0
+        reserve = max(1, reserve)
+        if self.whole:
+            self._whole = Growable((self.n_words,), np.uint64, reserve)
+            return
+        # per word: (plane, bit shift of the plane inside the word)
+        self._planes: list[list[tuple[Growable, np.uint64]]] = []
+        for b in self.word_bytes:
+            planes, shift = [], 0
+            for size in _PLANES[b]:
+                dtype = np.dtype(f"u{size}")
+                planes.append((Growable((), dtype, reserve), np.uint64(shift)))
+                shift += 8 * size
+            self._planes.append(planes)
+
+    @property
+    def capacity(self) -> int:
+        """Rows that fit without copying."""
+        if self.whole:
+            return self._whole.capacity
+        return min(p.capacity for planes in self._planes for p, _ in planes)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the rows written."""
+        return self.size * self.row_bytes
+
+    def growth_bytes(self, rows: int) -> int:
+        """As `Growable.growth_bytes`, over all planes."""
+        if self.whole:
+            return self._whole.growth_bytes(rows)
+        return sum(p.growth_bytes(rows) for planes in self._planes for p, _ in planes)
+
+    def put(self, start: int, words: KeyArray) -> None:
+        """Write ``words`` (shape ``(m, n_words)``) as rows ``start ...`` (within
+        ``size`` or right after it). Raises ``ValueError`` if a word uses a byte
+        beyond its ``word_bytes`` (the layout promised they are zero)."""
+        m = words.shape[0]
+        end = start + m
+        if self.whole:
+            self._whole.ensure(end)
+            self._whole.size = max(self._whole.size, end)
+            self._whole.view[start:end] = words
+            self.size = max(self.size, end)
+            return
+        for w, planes in enumerate(self._planes):
+            word = words[:, w]
+            if (word & ~self.masks[w]).any():
+                raise ValueError(
+                    f"PackedRows: a key uses more than {self.word_bytes[w]} bytes of word {w}"
+                )
+            for plane, shift in planes:
+                plane.ensure(end)
+                plane.size = max(plane.size, end)
+                part = word >> shift if shift else word
+                plane.view[start:end] = part.astype(plane.view.dtype)  # keeps the low bytes
+        self.size = max(self.size, end)
+
+    def append(self, words: KeyArray) -> None:
+        """Add ``words`` as the next rows."""
+        self.put(self.size, words)
+
+    def _joined(self, parts: list[tuple[npt.NDArray[Any], np.uint64]]) -> KeyArray:
+        """One word from its planes' values. A ``uint64`` plane is a word's only one,
+        so it is returned as is (no copy, never written); a narrower first plane is
+        copied into the word the others are OR-ed into."""
+        first, _ = parts[0]
+        word: KeyArray = first.astype(np.uint64, copy=False)
+        for value, shift in parts[1:]:
+            word |= np.left_shift(value, shift, dtype=np.uint64)
+        return word
+
+    def words(self, start: int, stop: int) -> KeyArray:
+        """Rows ``start .. stop - 1`` as words ``(m, n_words)`` (a view with whole
+        words: do not write to it)."""
+        stop = min(max(start, stop), self.size)
+        if self.whole:
+            view: KeyArray = self._whole.view[start:stop]
+            return view
+        out = np.empty((stop - start, self.n_words), dtype=np.uint64)
+        for w, planes in enumerate(self._planes):
+            out[:, w] = self._joined([(p.view[start:stop], s) for p, s in planes])
+        return out
+
+    def take(self, ids: IntArray) -> KeyArray:
+        """Rows ``ids`` as words ``(len(ids), n_words)``."""
+        if self.whole:
+            rows: KeyArray = self._whole.view.take(ids, axis=0)
+            return rows
+        out = np.empty((ids.size, self.n_words), dtype=np.uint64)
+        for w, planes in enumerate(self._planes):
+            out[:, w] = self._joined([(p.view.take(ids), s) for p, s in planes])
+        return out
+
+    def take_flat(self, ids: IntArray) -> KeyArray:
+        """`take` of one-word rows as a 1-D array."""
+        if self.whole:
+            flat: KeyArray = self._whole.view[:, 0].take(ids)
+            return flat
+        return self._joined([(p.view.take(ids), s) for p, s in self._planes[0]])
+
+
+class KeyView:
+    """The stored keys as words, read from a `PackedRows` only where they are
+    indexed: ``view[a:b]`` and ``view.take(ids, axis=0)`` build just those rows, so a
+    block of the frontier or a trace step never materialises the whole store. Any
+    other index, ``len``, ``shape`` and numpy conversion see the whole array."""
+
+    def __init__(self, rows: PackedRows) -> None:
+        self._rows = rows
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self._rows.size, self._rows.n_words)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes the rows take in the store."""
+        return self._rows.nbytes
+
+    def __len__(self) -> int:
+        return self._rows.size
+
+    def __getitem__(self, index: Any) -> KeyArray:
+        if isinstance(index, slice) and index.step in (None, 1):
+            start, stop, _ = index.indices(self._rows.size)
+            return self._rows.words(start, stop)
+        if isinstance(index, np.ndarray) and index.ndim == 1 and index.dtype.kind in "iu":
+            ids = np.where(index < 0, index + self._rows.size, index).astype(np.int64)
+            return self._rows.take(ids)
+        whole: KeyArray = self._rows.words(0, self._rows.size)[index]
+        return whole
+
+    def take(self, ids: IntArray, axis: int = 0) -> KeyArray:
+        """Rows ``ids`` (``axis`` must be 0)."""
+        assert axis == 0, "KeyView.take reads rows"
+        return self._rows.take(np.asarray(ids, dtype=np.int64))
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> KeyArray:
+        whole = self._rows.words(0, self._rows.size)
+        return whole if dtype is None else whole.astype(dtype)
+
+    def tolist(self) -> list[list[int]]:
+        rows: list[list[int]] = self._rows.words(0, self._rows.size).tolist()
+        return rows
+
+
+def _word_bytes(n_words: int, word_bytes: Sequence[int] | None) -> tuple[int, ...]:
+    """Bytes stored of each of ``n_words`` words: all 8 unless told."""
+    if word_bytes is None:
+        return (8,) * n_words
+    if len(word_bytes) != n_words:
+        raise ValueError(f"KeyStore: {len(word_bytes)} word byte counts for {n_words} words")
+    return tuple(int(b) for b in word_bytes)
 
 
 def _same(a: npt.NDArray[np.uint64], b: npt.NDArray[np.uint64]) -> BoolArray:
@@ -277,11 +485,12 @@ class KeyStore:
         capacity: int = 1 << 12,
         wide_index: bool = False,
         reserve: int | None = None,
+        word_bytes: Sequence[int] | None = None,
     ) -> None:
         self.n_words = n_words
         self._index_type = np.int64 if wide_index else np.int32
         reserve = min(max(capacity, reserve or 0), RESERVE_LIMIT)
-        self._keys = Growable((n_words,), np.uint64, reserve)
+        self._keys = PackedRows(_word_bytes(n_words, word_bytes), reserve)
         self._buffer = _reserved((int(reserve / MAX_LOAD) + 16,), self._index_type)
         self._use_table(max(16, int(capacity / MAX_LOAD) + 1))
 
@@ -298,27 +507,52 @@ class KeyStore:
         return self._keys.size
 
     @property
-    def keys(self) -> KeyArray:
-        """Keys of all stored states, shape ``(size, n_words)`` (a view)."""
-        keys: KeyArray = self._keys.view
-        return keys
+    def keys(self) -> KeyView:
+        """Keys of all stored states, shape ``(size, n_words)``, read as words where
+        indexed (`KeyView`)."""
+        return KeyView(self._keys)
+
+    @property
+    def word_bytes(self) -> tuple[int, ...]:
+        """Bytes stored of each key word."""
+        return self._keys.word_bytes
 
     @property
     def nbytes(self) -> int:
         """Bytes of the stored keys and of the table in use."""
-        return int(self.keys.nbytes + self._index.nbytes)
+        return int(self._keys.nbytes + self._index.nbytes)
 
-    def rekey(self, keys: KeyArray) -> None:
+    def rekey(self, keys: KeyArray, word_bytes: Sequence[int] | None = None) -> None:
         """Replace every stored key by ``keys`` (same states, same order, a new packing,
         pairwise distinct) and rebuild the table in place: a widening re-packs the
         store without allocating (and touching) a new table."""
-        keys = np.ascontiguousarray(keys)
-        if keys.shape[1] == self.n_words:
-            self._keys.view[:] = keys
+        self.repack(lambda block: block, keys.shape[1], word_bytes, source=keys)
+
+    def repack(
+        self,
+        convert: Callable[[KeyArray], KeyArray],
+        n_words: int,
+        word_bytes: Sequence[int] | None = None,
+        source: KeyArray | None = None,
+    ) -> None:
+        """Replace every stored key by ``convert`` of it (a new packing: same states,
+        same order, pairwise distinct keys of ``n_words`` words that use
+        ``word_bytes``), a block of `FILL_CHUNK` keys at a time, then rebuild the
+        table in place. With the same bytes per row the keys are rewritten in place;
+        otherwise the new rows are written to a new buffer (the old one is freed
+        after): no whole copy of the store as words is ever made."""
+        new_bytes = _word_bytes(n_words, word_bytes)
+        old = self._keys
+        read = (lambda a, b: source[a:b]) if source is not None else old.words
+        if new_bytes == old.word_bytes:
+            target = old
         else:
-            self.n_words = keys.shape[1]
-            self._keys = Growable((self.n_words,), np.uint64, self._keys.capacity)
-            self._keys.append(keys)
+            target = PackedRows(new_bytes, max(old.capacity, old.size))
+        for start in range(0, old.size, FILL_CHUNK):
+            stop = min(start + FILL_CHUNK, old.size)
+            target.put(start, np.ascontiguousarray(convert(read(start, stop))))
+        self._keys = target
+        self.n_words = n_words
         self._resize(self._slots)
 
     def growth_bytes(self, more: int) -> int:
@@ -359,7 +593,6 @@ class KeyStore:
         content: npt.NDArray[np.integer],
         which: IntArray,
         cand: npt.NDArray[np.uint64],
-        stored: npt.NDArray[np.uint64],
     ) -> BoolArray:
         """Whether the slots with ``content`` hold the key of candidates ``which``
         (a positive content refers to ``stored``, a negative one to ``cand``)."""
@@ -368,18 +601,22 @@ class KeyStore:
         ref = content.take(full).astype(np.int64)
         if ref.size and int(ref.min()) > 0:  # the usual case: stored states only
             ref -= 1
-            out[full] = _same(stored.take(ref, axis=0), cand.take(which.take(full), axis=0))
+            out[full] = _same(self._stored(ref), cand.take(which.take(full), axis=0))
             return out
         old = ref > 0
         if old.any():
             at = full.compress(old)
             ref_old = ref.compress(old) - 1
-            out[at] = _same(stored.take(ref_old, axis=0), cand.take(which.take(at), axis=0))
+            out[at] = _same(self._stored(ref_old), cand.take(which.take(at), axis=0))
         if not old.all():
             at = full.compress(~old)
             ref_new = -1 - ref.compress(~old)
             out[at] = _same(cand.take(ref_new, axis=0), cand.take(which.take(at), axis=0))
         return out
+
+    def _stored(self, ids: IntArray) -> npt.NDArray[np.uint64]:
+        """Stored keys ``ids`` in `_flat` form."""
+        return self._keys.take_flat(ids) if self.n_words == 1 else self._keys.take(ids)
 
     def _resize(self, slots: int) -> None:
         """A table of ``slots`` slots, rebuilt from the stored keys a chunk at a time
@@ -387,7 +624,7 @@ class KeyStore:
         self._index[:] = EMPTY  # pages already touched; the rest of a buffer is still zero
         self._use_table(slots)
         for start in range(0, self.size, FILL_CHUNK):
-            part = self.keys[start : start + FILL_CHUNK]
+            part = self._keys.words(start, start + FILL_CHUNK)
             ids = np.arange(start, start + part.shape[0], dtype=np.int64)
             self._place(self._home(part), ids)
 
@@ -471,7 +708,6 @@ class KeyStore:
         slots: IntArray,
         which: IntArray,
         cand: npt.NDArray[np.uint64],
-        stored: npt.NDArray[np.uint64],
     ) -> tuple[BoolArray, BoolArray, IntArray]:
         """One probing round from ``slots`` for candidates ``which``: per candidate,
         whether it found its key, whether it found a free slot (never both), and that
@@ -480,12 +716,12 @@ class KeyStore:
         (less work per candidate)."""
         if slots.size > PROBE_WINDOW_BELOW:
             content = self._index.take(slots)
-            return self._matches(content, which, cand, stored), content == EMPTY, slots
+            return self._matches(content, which, cand), content == EMPTY, slots
         window = slots[:, None] + _WINDOW
         self._wrap(window)
         contents = self._index.take(window)
         wide = np.repeat(which, _WINDOW.size)
-        hits = self._matches(contents.reshape(-1), wide, cand, stored).reshape(contents.shape)
+        hits = self._matches(contents.reshape(-1), wide, cand).reshape(contents.shape)
         stops = contents == EMPTY
         stops |= hits
         first = stops.argmax(axis=1)
@@ -508,12 +744,12 @@ class KeyStore:
     def find(self, cand: KeyArray) -> IntArray:
         """State number of each candidate key, ``-1`` if it is not stored."""
         cand = np.ascontiguousarray(cand)
-        flat, stored = self._flat(cand), self._flat(self.keys)
+        flat = self._flat(cand)
         slots = self._home(cand)
         out = np.full(cand.shape[0], -1, dtype=np.int64)
         pos = np.arange(cand.shape[0], dtype=np.int64)
         while pos.size:
-            hit, free, at = self._probe(slots, pos, flat, stored)
+            hit, free, at = self._probe(slots, pos, flat)
             where = np.flatnonzero(hit)
             out[pos.take(where)] = self._index.take(at.take(where)).astype(np.int64) - 1
             stopped = hit | free
@@ -568,14 +804,14 @@ class KeyStore:
         occurrence of every new key becomes a new state. Returns the positions of those
         first occurrences (ascending) and, if asked, every candidate's state number."""
         m = cand.shape[0]
-        flat, stored = self._flat(cand), self._flat(self.keys)
+        flat = self._flat(cand)
         slots = self._home(cand)
         index = self._index
         final = np.empty(m, dtype=np.int64) if want_ids else None
         pos = np.arange(m, dtype=np.int64)
         claimed: list[IntArray] = []
         while True:
-            done, empty, at = self._probe(slots, pos, flat, stored)
+            done, empty, at = self._probe(slots, pos, flat)
             stopped = done | empty
             free = np.flatnonzero(empty)
             if free.size:

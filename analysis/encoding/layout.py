@@ -251,6 +251,17 @@ class Layout:
         widths[self.place_onehot] = 0
         return widths
 
+    @cached_property
+    def word_bytes(self) -> tuple[int, ...]:
+        """Per word, the bytes its fields reach (at least 1): the store keeps only
+        those (`analysis.encoding.PackedRows`), since the bits above the top field
+        of a stored key are always 0 (an overflow is widened before it is stored)."""
+        used = [0] * self.n_words
+        for f, width in enumerate(self.bits):
+            w = int(self.word[f])
+            used[w] = max(used[w], int(self.shift[f]) + width)
+        return tuple(max(1, -(-u // 8)) for u in used)
+
     @property
     def boundary(self) -> KeyArray:
         """Per word, the bit just above every count field: an addition that overflows a

@@ -575,7 +575,7 @@ def test_field_columns_read_from_keys_are_the_markings_field_values(net: Net) ->
     """The frontier is unpacked from the stored keys (`Layout.fields`): the values must
     be those `FieldNet.values` computes from the markings themselves."""
     space = explore(net, max_states=2000)
-    got = space.layout.fields(space.keys, np.int64).T
+    got = space.layout.fields(space.keys[:], np.int64).T
     assert np.array_equal(got, encoding.FieldNet.values(space.markings, space.layout))
 
 
