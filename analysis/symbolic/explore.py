@@ -253,7 +253,8 @@ class SymbolicNet:
                 continue
             changed.append(p)
             cap = self.enc.capacity(p)
-            relation &= self.shifted(p, delta)
+            # the guard too: a loop that takes 3 and gives back 2 shifts by -1 but needs 3
+            relation &= guard & self.shifted(p, delta)
             overflow[p] = bdd.false  # filled in below, once the guard is complete
             if delta > 0:
                 overflow[p] = self.at_least(p, max(w_in, cap - delta + 1))
