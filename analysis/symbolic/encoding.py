@@ -29,8 +29,43 @@ def place_order(net: Net) -> list[int]:
     """The static order of places with the smaller `span_sum`: the greedy locality
     order (`locality_order`) or the PNML order (MCC nets list places by NUPN units,
     often already the better one)."""
-    candidates = [locality_order(net), list(range(len(net.places)))]
+    pnml = list(range(len(net.places)))
+    candidates = [locality_order(net), pnml, force_order(net, pnml)]
     return min(candidates, key=lambda order: span_sum(net, order))
+
+
+def force_order(net: Net, start: Sequence[int], rounds: int = 40) -> list[int]:
+    """FORCE (Aloul, Markov and Sakallah, "FORCE: a fast and easy-to-implement
+    variable-ordering heuristic", GLSVLSI 2003): each transition pulls its places
+    towards their centre of gravity; every round moves each place to the mean centre of
+    the transitions touching it and sorts. The best order seen by `span_sum` wins."""
+    index = {p.name: i for i, p in enumerate(net.places)}
+    supports = [
+        sorted({index[name] for name, _ in (*tr.inputs, *tr.outputs)}) for tr in net.transitions
+    ]
+    supports = [s for s in supports if s]
+    touching: list[list[int]] = [[] for _ in net.places]
+    for k, support in enumerate(supports):
+        for p in support:
+            touching[p].append(k)
+    order = list(start)
+    best, best_cost = list(order), span_sum(net, order)
+    for _ in range(rounds):
+        position = {p: i for i, p in enumerate(order)}
+        centre = [sum(position[p] for p in s) / len(s) for s in supports]
+        target = {
+            p: (
+                sum(centre[k] for k in touching[p]) / len(touching[p])
+                if touching[p]
+                else position[p]
+            )
+            for p in order
+        }
+        order = sorted(order, key=lambda p: (target[p], position[p]))
+        cost = span_sum(net, order)
+        if cost < best_cost:
+            best, best_cost = list(order), cost
+    return best
 
 
 def locality_order(net: Net) -> list[int]:

@@ -469,10 +469,15 @@ def _answers(
         net.places[p].name: _max_value(sym, reached, p, limits) for p in range(len(net.places))
     }
     heaviest = max(0, measures.max_weight(reached, xvars, weight, limits.check))
-    dead = sym.bdd.true
+    # the dead markings among the reached ones, narrowed one transition at a time: the
+    # dead markings of the whole encoding space make a diagram far larger than the
+    # reached set (17 s of Dekker-PT-010's 23 s)
+    hit = reached
     for t in sym.transitions:
-        dead &= ~t.enabled
-    hit = reached & dead
+        limits.check()
+        hit &= ~t.enabled
+        if hit == sym.bdd.false:
+            break
     deadlock: bool | None = hit != sym.bdd.false
     witness = None
     trace = None
@@ -480,7 +485,7 @@ def _answers(
         marking: list[int] | None = None
         if sym.limits.trace:
             try:
-                marking, trace = shortest_to_dead(sym, dead, limits.check)
+                marking, trace = shortest_to_dead(sym, hit, limits.check)
             except (_Budget, TraceError):
                 marking, trace = None, None  # the witness marking stands without its trace
         if marking is None:
