@@ -146,15 +146,22 @@ class _Transition:
     qvars: set[str]
     rename: dict[str, str]
     top: int
+    support: set[int]
 
 
 class SymbolicNet:
     """A net's encoding in one BDD manager: the initial marking, transitions, helpers."""
 
     def __init__(
-        self, net: Net, bits: list[int], limits: SymbolicLimits, deadline: _Deadline | None = None
+        self,
+        net: Net,
+        bits: list[int],
+        limits: SymbolicLimits,
+        deadline: _Deadline | None = None,
+        proven: frozenset[int] = frozenset(),
     ) -> None:
         self.net = net
+        self.proven = proven  # places whose bits hold a P-invariant bound
         self.limits = limits
         self.enc = Encoding(tuple(place_order(net)), tuple(bits))
         self.bdd = cudd.BDD()
@@ -255,15 +262,16 @@ class SymbolicNet:
             cap = self.enc.capacity(p)
             # the guard too: a loop that takes 3 and gives back 2 shifts by -1 but needs 3
             relation &= guard & self.shifted(p, delta)
-            overflow[p] = bdd.false  # filled in below, once the guard is complete
-            if delta > 0:
+            if delta > 0 and p not in self.proven:
+                # filled in below, once the guard is complete; a place whose bound a
+                # P-invariant proves never outgrows the counter sized for it
                 overflow[p] = self.at_least(p, max(w_in, cap - delta + 1))
             qvars.update(self.enc.xs(p))
             rename.update(zip(self.enc.ys(p), self.enc.xs(p), strict=True))
         overflow = {p: enabled & cond for p, cond in overflow.items()}
         support = set(pre) | set(post)
         top = min((self.level_of_place[p] for p in support), default=0)
-        return _Transition(name, relation, enabled, overflow, changed, qvars, rename, top)
+        return _Transition(name, relation, enabled, overflow, changed, qvars, rename, top, support)
 
     def image(self, states: Bdd, t: _Transition) -> Bdd:
         if not t.changed:
@@ -380,11 +388,12 @@ def explore_symbolic(net: Net, limits: SymbolicLimits | None = None) -> Symbolic
     start = time.monotonic()
     bounds = invariant_bounds(net, min(INVARIANT_SECONDS, limits.time_limit or INVARIANT_SECONDS))
     bits = initial_bits(net, bounds=bounds)
+    proven = frozenset(p for p, b in enumerate(bounds) if b is not None)
     conserved_bits = _conserved_bits(net)
     deadline = _Deadline(limits, start)
     while True:
         try:
-            sym = SymbolicNet(net, bits, limits, deadline)
+            sym = SymbolicNet(net, bits, limits, deadline, proven)
             reached, sweeps, peak, reason = _fixpoint(sym, deadline)
             break
         except _Budget as exc:

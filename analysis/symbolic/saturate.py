@@ -53,25 +53,43 @@ class Saturation:
 
     def run(self, initial: Bdd) -> tuple[Bdd, str | None]:
         """The markings reachable from `initial` (closed under every transition), or
-        the markings found so far and the reason a budget stopped the run."""
+        the markings found so far and the reason a budget stopped the run.
+
+        After a group adds markings, the walk restarts at the lowest group whose
+        support meets the places that group changes (saturation's event locality:
+        the others cannot newly fire where nothing they read changed, so their turn
+        can wait and take the new markings in one batch). Whatever the schedule, the
+        run ends only when a full scan finds every group closed at the reached set."""
         false = self.sym.bdd.false
         reached = initial
         closed_at = [false] * len(self.groups)
+        supports = [set().union(*(t.support for t in g)) for g in self.groups]
+        changes = [set().union(*(t.changed for t in g)) for g in self.groups]
         i = 0
-        while i < len(self.groups):
-            frontier = reached & ~closed_at[i]
-            if frontier == false:
-                i += 1
-                continue
-            self.rounds += 1
-            before = reached
-            reached, reason = self._close(self.groups[i], reached, frontier)
-            closed_at[i] = reached
-            if reason is not None:
-                return reached, reason
-            # new markings may enable the groups below again: close them first
-            i = 0 if reached != before else i + 1
-        return reached, None
+        while True:
+            while i < len(self.groups):
+                frontier = reached & ~closed_at[i]
+                if frontier == false:
+                    i += 1
+                    continue
+                self.rounds += 1
+                before = reached
+                reached, reason = self._close(self.groups[i], reached, frontier)
+                closed_at[i] = reached
+                if reason is not None:
+                    return reached, reason
+                if reached == before:
+                    i += 1
+                    continue
+                touched = changes[i]
+                i = next((j for j in range(i) if supports[j] & touched), i + 1)
+            # the final scan: every group closed at the reached set
+            i = next(
+                (j for j in range(len(self.groups)) if (reached & ~closed_at[j]) != false),
+                len(self.groups),
+            )
+            if i == len(self.groups):
+                return reached, None
 
     def _close(
         self, group: list[_Transition], reached: Bdd, frontier: Bdd
