@@ -386,7 +386,13 @@ def explore_symbolic(net: Net, limits: SymbolicLimits | None = None) -> Symbolic
     """
     limits = limits or SymbolicLimits()
     start = time.monotonic()
-    bounds = invariant_bounds(net, min(INVARIANT_SECONDS, limits.time_limit or INVARIANT_SECONDS))
+    seconds = [INVARIANT_SECONDS]
+    if limits.time_limit is not None:
+        seconds.append(limits.time_limit)
+    left = limits.budget.remaining() if limits.budget is not None else None
+    if left is not None:
+        seconds.append(left)
+    bounds = invariant_bounds(net, min(seconds))
     bits = initial_bits(net, bounds=bounds)
     proven = frozenset(p for p, b in enumerate(bounds) if b is not None)
     conserved_bits = _conserved_bits(net)
