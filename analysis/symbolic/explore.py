@@ -1,25 +1,29 @@
-"""The reachable markings as a BDD, by chained fixpoints over per-transition relations.
+"""The reachable markings as a BDD, by a saturation-style fixpoint over per-transition
+relations (`analysis.symbolic.saturate`; chaining kept to measure against).
 
 Each transition gets its own relation over only the places it touches (a partitioned
 relation): places it reads without changing are a guard on the current bits, places it
-changes map current bits to next bits. Images are `and_exists` then a rename, and the
-transitions are applied in a chain ordered by their lowest place in the variable order,
-so one sweep carries tokens along a whole causal chain (Roig, Cortadella and Pastor,
-"Verification of asynchronous circuits by BDD-based model checking of Petri nets",
-1995: chaining). Counters that would outgrow their bits are detected before any image
-is taken, the encoding widened and the fixpoint restarted: a value never wraps.
+changes map current bits to next bits. Images are `and_exists` then a rename. The
+chained schedule applies the transitions in order of their top place in the variable
+order, so one sweep carries tokens along a whole causal chain (Roig, Cortadella and
+Pastor, "Verification of asynchronous circuits by BDD-based model checking of Petri
+nets", 1995). Counters are sized by P-invariant bounds where one exists; a counter that
+would outgrow its bits is detected before any image is taken, the encoding widened and
+the fixpoint restarted: a value never wraps.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Literal
 
 import dd.cudd as cudd
 
 from analysis.budget import Budget, memory_limit_reason, resident_bytes
-from analysis.symbolic.encoding import Encoding, initial_bits, place_order
+from analysis.symbolic.encoding import Encoding, initial_bits, invariant_bounds, place_order
+from analysis.symbolic.saturate import Saturation
+from analysis.symbolic.trace import TraceError, shortest_to_dead
 from coral_lang.net import Net
 
 Bdd = Any  # dd.cudd.Function: the stubs of dd are not typed
@@ -38,13 +42,19 @@ class SymbolicLimits:
     """The command's budget: its deadline and memory limit bound the run too (checked
     after every transition's image, and inside counting and the trace search)."""
     trace: bool = True
-    """Search a firing sequence to the deadlock witness (backward layers of preimages)."""
+    """Search a shortest firing sequence to a dead marking (forward layers of images,
+    `analysis.symbolic.trace`)."""
+    strategy: Literal["saturation", "chaining"] = "saturation"
+    """The fixpoint's schedule (`analysis.symbolic.saturate`); chaining is the older
+    one, kept to measure against."""
 
 
 BYTES_PER_NODE = 48
 """What one CUDD node costs with its share of the unique table and computed cache: the
 memory limit becomes a node budget, checked after every image (an allocation CUDD
 cannot make is caught too, but the node budget stops the run well before)."""
+
+NODE_CHECK_SECONDS = 0.1
 
 
 @dataclass
@@ -87,6 +97,8 @@ class _Deadline:
         self.start = start
         self.max_nodes = limits.max_nodes
         self.memory_reason: str | None = None
+        self.next_count = 0.0
+        self.last_nodes = 0
         budget = limits.budget
         if budget is not None and budget.memory is not None:
             spare = max(0, budget.memory - resident_bytes()) // BYTES_PER_NODE
@@ -105,6 +117,18 @@ class _Deadline:
             return self.memory_reason or f"node budget of {self.max_nodes} BDD nodes"
         return None
 
+    def nodes(self, bdd: Any) -> int:
+        """CUDD's live node count, read at most every `NODE_CHECK_SECONDS` and never
+        more than 5% of the time: reading it walks the whole unique table
+        (`Cudd_CheckZeroRef`, 40 ms on a grown table), which cost 75% of a fixpoint
+        when read after every image; in between, the last count."""
+        now = time.monotonic()
+        if now >= self.next_count:
+            self.last_nodes = len(bdd)
+            spent = time.monotonic() - now
+            self.next_count = now + max(NODE_CHECK_SECONDS, 20 * spent)
+        return self.last_nodes
+
     def check(self) -> None:
         """Raise `_Budget` once a limit is passed (for the passes after the fixpoint)."""
         reason = self.reason()
@@ -122,15 +146,22 @@ class _Transition:
     qvars: set[str]
     rename: dict[str, str]
     top: int
+    support: set[int]
 
 
 class SymbolicNet:
     """A net's encoding in one BDD manager: the initial marking, transitions, helpers."""
 
     def __init__(
-        self, net: Net, bits: list[int], limits: SymbolicLimits, deadline: _Deadline | None = None
+        self,
+        net: Net,
+        bits: list[int],
+        limits: SymbolicLimits,
+        deadline: _Deadline | None = None,
+        proven: frozenset[int] = frozenset(),
     ) -> None:
         self.net = net
+        self.proven = proven  # places whose bits hold a P-invariant bound
         self.limits = limits
         self.enc = Encoding(tuple(place_order(net)), tuple(bits))
         self.bdd = cudd.BDD()
@@ -229,29 +260,23 @@ class SymbolicNet:
                 continue
             changed.append(p)
             cap = self.enc.capacity(p)
-            relation &= self.shifted(p, delta)
-            overflow[p] = bdd.false  # filled in below, once the guard is complete
-            if delta > 0:
+            # the guard too: a loop that takes 3 and gives back 2 shifts by -1 but needs 3
+            relation &= guard & self.shifted(p, delta)
+            if delta > 0 and p not in self.proven:
+                # filled in below, once the guard is complete; a place whose bound a
+                # P-invariant proves never outgrows the counter sized for it
                 overflow[p] = self.at_least(p, max(w_in, cap - delta + 1))
             qvars.update(self.enc.xs(p))
             rename.update(zip(self.enc.ys(p), self.enc.xs(p), strict=True))
         overflow = {p: enabled & cond for p, cond in overflow.items()}
         support = set(pre) | set(post)
         top = min((self.level_of_place[p] for p in support), default=0)
-        return _Transition(name, relation, enabled, overflow, changed, qvars, rename, top)
+        return _Transition(name, relation, enabled, overflow, changed, qvars, rename, top, support)
 
     def image(self, states: Bdd, t: _Transition) -> Bdd:
         if not t.changed:
             return states & t.relation
         return self.bdd.let(t.rename, cudd.and_exists(states, t.relation, t.qvars))
-
-    def preimage(self, states: Bdd, t: _Transition) -> Bdd:
-        """Markings from which `t` leads into `states`: rename the changed places' x
-        bits to y, then conjoin with the relation and quantify the y bits away."""
-        if not t.changed:
-            return states & t.relation
-        back = {x: y for y, x in t.rename.items()}
-        return cudd.and_exists(self.bdd.let(back, states), t.relation, set(t.rename))
 
     def contains(self, states: Bdd, marking: list[int]) -> bool:
         return bool((states & self.marking_cube(marking, current=True)) != self.bdd.false)
@@ -263,8 +288,30 @@ class SymbolicNet:
 
 
 def _fixpoint(sym: SymbolicNet, limits: _Deadline) -> tuple[Bdd, int, int, str | None]:
-    """Chained fixpoint over frontiers; returns (reached, sweeps, peak nodes, reason it
-    stopped early).
+    """The reachable markings by the strategy `limits` names; returns (reached,
+    iterations, peak nodes, reason it stopped early). Raises `_Overflow` after a
+    fixpoint in which some counter would have outgrown its bits."""
+    if limits.limits.strategy == "chaining":
+        return _chained(sym, limits)
+    overflow: set[int] = set()
+    peak = len(sym.bdd)
+
+    def step(t: _Transition, frontier: Bdd) -> str | None:
+        nonlocal peak
+        overflow.update(sym.overflowing(frontier, t))
+        nodes = limits.nodes(sym.bdd)
+        peak = max(peak, nodes)
+        return limits.reason(nodes)
+
+    run = Saturation(sym, step)
+    reached, reason = run.run(sym.initial)
+    if reason is None and overflow:
+        raise _Overflow(overflow)
+    return reached, run.rounds, peak, reason
+
+
+def _chained(sym: SymbolicNet, limits: _Deadline) -> tuple[Bdd, int, int, str | None]:
+    """Chained fixpoint over frontiers (`strategy="chaining"`, kept for comparison).
 
     Each transition's image is taken of the frontier only (the markings it has not yet
     been applied to), and what it adds joins the frontier at once, so the transitions
@@ -287,7 +334,7 @@ def _fixpoint(sym: SymbolicNet, limits: _Deadline) -> tuple[Bdd, int, int, str |
                 reached |= new
                 frontier |= new
                 added |= new
-            nodes = len(sym.bdd)
+            nodes = limits.nodes(sym.bdd)
             peak = max(peak, nodes)
             reason = limits.reason(nodes)
             if reason is not None:
@@ -298,43 +345,6 @@ def _fixpoint(sym: SymbolicNet, limits: _Deadline) -> tuple[Bdd, int, int, str |
         # one fixpoint: widen them all at once, then start again
         raise _Overflow(overflow)
     return reached, sweeps, peak, None
-
-
-def deadlock_trace(sym: SymbolicNet, reached: Bdd, dead: list[int], limits: _Deadline) -> list[str]:
-    """A shortest firing sequence from the initial marking to the marking `dead`.
-
-    Backward breadth-first layers of preimages inside `reached` (layer k: the markings
-    k firings away from `dead`) until the initial marking is in one; then a forward
-    walk on concrete markings, firing at each step a transition whose successor lies in
-    the next layer down. Raises `_Budget` when a limit runs out."""
-    false = sym.bdd.false
-    layers = [sym.marking_cube(dead, current=True)]
-    seen = layers[0]
-    while not sym.contains(layers[-1], [p.initial for p in sym.net.places]):
-        layer = false
-        for t in sym.transitions:
-            layer |= sym.preimage(layers[-1], t)
-            limits.check()
-        layer &= reached & ~seen
-        if layer == false:
-            raise _Budget("the dead marking is not reachable backwards (internal error)")
-        seen |= layer
-        layers.append(layer)
-    net = sym.net
-    marking = net.initial_marking()
-    trace: list[str] = []
-    for layer in reversed(layers[:-1]):
-        for tr in net.transitions:
-            if not net.enabled(marking, tr):
-                continue
-            after = net.fire(marking, tr)
-            if sym.contains(layer, list(after)):
-                marking = after
-                trace.append(tr.name)
-                break
-        else:
-            raise _Budget("no transition leads to the next layer (internal error)")
-    return trace
 
 
 def _max_value(sym: SymbolicNet, states: Bdd, place: int, limits: _Deadline) -> int:
@@ -376,12 +386,20 @@ def explore_symbolic(net: Net, limits: SymbolicLimits | None = None) -> Symbolic
     """
     limits = limits or SymbolicLimits()
     start = time.monotonic()
-    bits = initial_bits(net)
+    seconds = [INVARIANT_SECONDS]
+    if limits.time_limit is not None:
+        seconds.append(limits.time_limit)
+    left = limits.budget.remaining() if limits.budget is not None else None
+    if left is not None:
+        seconds.append(left)
+    bounds = invariant_bounds(net, min(seconds))
+    bits = initial_bits(net, bounds=bounds)
+    proven = frozenset(p for p, b in enumerate(bounds) if b is not None)
     conserved_bits = _conserved_bits(net)
     deadline = _Deadline(limits, start)
     while True:
         try:
-            sym = SymbolicNet(net, bits, limits, deadline)
+            sym = SymbolicNet(net, bits, limits, deadline, proven)
             reached, sweeps, peak, reason = _fixpoint(sym, deadline)
             break
         except _Budget as exc:
@@ -397,8 +415,12 @@ def explore_symbolic(net: Net, limits: SymbolicLimits | None = None) -> Symbolic
                     f"place(s) {names} exceed {(1 << limits.max_bits) - 1} tokens: "
                     "the net may be unbounded",
                 )
-            for p in over.places:
-                bits[p] = min(limits.max_bits, max(bits[p] + 1, conserved_bits))
+            # doubled, and with it every place no invariant bounds: tokens that pile up
+            # in one place usually flow on into the next (DoubleExponent-PT-002 found its
+            # 9 unbounded places one restart at a time, 29 restarts)
+            unproven = [p for p, b in enumerate(bounds) if b is None and bits[p] < limits.max_bits]
+            for p in {*over.places, *unproven}:
+                bits[p] = min(limits.max_bits, max(2 * bits[p], conserved_bits))
         except _OUT_OF_MEMORY as exc:
             return _stopped(net, bits, start, _memory_reason(limits, exc))
     after = deadline
@@ -417,6 +439,9 @@ def explore_symbolic(net: Net, limits: SymbolicLimits | None = None) -> Symbolic
 
 
 GRACE_SECONDS = 1.0
+
+INVARIANT_SECONDS = 1.0
+"""At most this long for the P-invariants whose bounds size the counters."""
 
 
 _OUT_OF_MEMORY = (MemoryError, RuntimeError, ValueError)
@@ -459,22 +484,29 @@ def _answers(
         net.places[p].name: _max_value(sym, reached, p, limits) for p in range(len(net.places))
     }
     heaviest = max(0, measures.max_weight(reached, xvars, weight, limits.check))
-    dead = sym.bdd.true
+    # the dead markings among the reached ones, narrowed one transition at a time: the
+    # dead markings of the whole encoding space make a diagram far larger than the
+    # reached set (17 s of Dekker-PT-010's 23 s)
+    hit = reached
     for t in sym.transitions:
-        dead &= ~t.enabled
-    hit = reached & dead
+        limits.check()
+        hit &= ~t.enabled
+        if hit == sym.bdd.false:
+            break
     deadlock: bool | None = hit != sym.bdd.false
     witness = None
     trace = None
     if deadlock:
-        pick = sym.bdd.pick(hit, care_vars=set(xvars))
-        marking = decode(sym, pick or {})
-        witness = {net.places[p].name: v for p, v in enumerate(marking) if v}
+        marking: list[int] | None = None
         if sym.limits.trace:
             try:
-                trace = deadlock_trace(sym, reached, marking, limits)
-            except _Budget:
-                trace = None  # the witness marking stands without its trace
+                marking, trace = shortest_to_dead(sym, hit, limits.check)
+            except (_Budget, TraceError):
+                marking, trace = None, None  # the witness marking stands without its trace
+        if marking is None:
+            pick = sym.bdd.pick(hit, care_vars=set(xvars))
+            marking = decode(sym, pick or {})
+        witness = {net.places[p].name: v for p, v in enumerate(marking) if v}
     elif reason is not None:
         deadlock = None  # none found among the markings reached so far
     return SymbolicResult(

@@ -5,7 +5,14 @@ from __future__ import annotations
 
 import pytest
 
-from analysis.symbolic.encoding import locality_order, place_order, span_sum
+from analysis.symbolic.encoding import (
+    force_order,
+    initial_bits,
+    invariant_bounds,
+    locality_order,
+    place_order,
+    span_sum,
+)
 from coral_lang.pnml.read import read_pnml
 from tests.conftest import CONFORMANCE
 
@@ -29,3 +36,29 @@ def test_span_sum_counts_each_transition_band() -> None:
     # reversing the order keeps every band's width
     assert span_sum(net, identity) == span_sum(net, reverse)
     assert span_sum(net, identity) > 0
+
+
+def test_invariant_bounds_size_the_counters() -> None:
+    """Peterson-PT-2 is covered by P-invariants: every place is safe, one bit each,
+    where the arcs alone would ask as much (and an unproven place starts from them)."""
+    net = read_pnml(CONFORMANCE / "pnml" / "Peterson-PT-2.pnml")
+    bounds = invariant_bounds(net, 5.0)
+    assert bounds == [1] * len(net.places)
+    assert initial_bits(net, bounds=bounds) == [1] * len(net.places)
+    heavy = read_pnml(CONFORMANCE / "pnml" / "SatelliteMemory-PT-X00100Y0003.pnml")
+    proven = invariant_bounds(heavy, 5.0)
+    assert all(b is not None for b in proven) and max(b or 0 for b in proven) == 100
+    bits = initial_bits(heavy, bounds=proven)
+    assert bits == [max(1, b or 0).bit_length() for b in proven]
+    assert initial_bits(heavy, bounds=[None] * len(heavy.places)) == initial_bits(heavy)
+
+
+@pytest.mark.parametrize("model", ["Dekker-PT-010", "Referendum-PT-0010", "Peterson-PT-2"])
+def test_force_order_never_widens_the_bands_it_starts_from(model: str) -> None:
+    """FORCE keeps the best order it sees: a permutation no worse than its start, and
+    on these nets (PNML order lists all flags, then all control places) strictly better."""
+    net = read_pnml(CONFORMANCE / "pnml" / f"{model}.pnml")
+    start = list(range(len(net.places)))
+    order = force_order(net, start)
+    assert sorted(order) == start
+    assert span_sum(net, order) < span_sum(net, start)
