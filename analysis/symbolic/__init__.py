@@ -9,12 +9,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from analysis.symbolic.choose import choose_method
-
 if TYPE_CHECKING:
     from analysis.symbolic.explore import SymbolicLimits, SymbolicResult, explore_symbolic
 
-__all__ = ["SymbolicLimits", "SymbolicResult", "choose_method", "explore_symbolic"]
+__all__ = ["SymbolicLimits", "SymbolicResult", "explore_symbolic"]
 
 
 def __getattr__(name: str) -> Any:

@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from analysis.budget import Budget, resident_bytes
-from analysis.symbolic import SymbolicLimits, choose_method, explore_symbolic
+from analysis.symbolic import SymbolicLimits, explore_symbolic
 from analysis.symbolic.explore import GRACE_SECONDS as GRACE
 from coral_lang.net import Net, Place, Transition
 from coral_lang.pnml.read import read_pnml
@@ -129,11 +129,6 @@ def test_deadlock_witness_is_dead() -> None:
     result = explore_symbolic(net)
     assert result.deadlock is True
     assert result.deadlock_marking == {"p3": 2}
-
-
-def test_choose_method_prefers_symbolic_for_huge_conservative_nets() -> None:
-    assert choose_method(_cycles(40)) == "symbolic"
-    assert choose_method(_cycles(3)) == "explicit"
 
 
 @pytest.mark.parametrize("model", ["Philosophers-PT-000005", "Railroad-PT-005", "ERK-PT-000001"])
