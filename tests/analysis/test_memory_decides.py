@@ -1,7 +1,7 @@
 """End to end: a net where the memory limit alone decides the outcome of
 ``coral-check verify``. Its deadlock freedom is out of reach of every method that needs
 no state space (the state equation and its traps admit a spurious dead marking, the
-structural reductions leave the net as it is), and its 2^24 markings do not fit in
+structural reductions leave the net as it is), and its 2^26 markings do not fit in
 200 MiB: the run must end with exit 3, the deadlock verdict inconclusive and naming the
 memory limit, never a crash or a wrong verdict."""
 
@@ -84,9 +84,10 @@ def test_only_a_search_can_show_the_net_deadlock_free(tmp_path: Path) -> None:
 
 def test_the_memory_limit_decides_verify(tmp_path: Path) -> None:
     model = tmp_path / "guarded.pnml"
-    model.write_text(guarded_toggles_pnml(24))
+    model.write_text(guarded_toggles_pnml(26))  # 2^26 markings: over 200 MiB at any packing
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     command = [sys.executable, "-m", "analysis.cli", "verify", str(model), "--format", "json"]
+    command += ["--method", "explicit"]  # a decision diagram would count them all
     limits = ["--memory-limit", "200M", "--max-states", "100000000", "--time-limit", "60"]
     done = subprocess.run(
         [*command, *limits], capture_output=True, text=True, env=env, timeout=120, check=False
