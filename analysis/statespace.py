@@ -49,6 +49,7 @@ Typical use::
 from __future__ import annotations
 
 import ctypes
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import cast
@@ -371,6 +372,14 @@ class SleepSets:
         self.bit = np.where(inside, np.left_shift(np.uint64(1), (t % 64).astype(np.uint64)), 0)
         self.bit = self.bit.astype(np.uint64)
         self.independent = self._independence(cn)
+        # `wake` reads the sleep bits a byte at a time: tracked transition ``t`` is bit
+        # ``t % 8`` of byte ``byte[t]`` of its marking's ``8 * words`` bytes.
+        tracked = np.arange(self.tracked)
+        within = (tracked % 64) // 8
+        if sys.byteorder == "big":
+            within = 7 - within
+        self.byte = (tracked // 64) * 8 + within
+        self.byte_bit = np.left_shift(1, tracked % 8).astype(np.uint8)[:, None]
 
     def _masks(
         self, cn: CompactNet, rows: npt.NDArray[np.int64], places: npt.NDArray[np.int64]
@@ -411,6 +420,16 @@ class SleepSets:
         word &= self.bit.take(trans)
         awake: npt.NDArray[np.bool_] = word == 0
         return awake
+
+    def wake(self, enabled: npt.NDArray[np.bool_], sleep: npt.NDArray[np.uint64]) -> None:
+        """Clear the asleep entries of a block's ``(T, n)`` enabled matrix (``sleep`` is
+        ``(n, words)``): `awake` on the matrix, a few passes over bytes instead of a
+        gather per edge (Dekker enables 60 transitions per marking and fires 16)."""
+        n = sleep.shape[0]
+        per_byte = np.ascontiguousarray(sleep).view(np.uint8).reshape(n, 8 * self.words)
+        bits = np.ascontiguousarray(per_byte.T).take(self.byte, axis=0)
+        bits &= self.byte_bit
+        enabled[: self.tracked] &= bits == 0
 
     def successors(
         self,
@@ -1115,6 +1134,28 @@ class _Explorer:
             trans, src = trans.take(order), src.take(order)
         return trans, src
 
+    def matrix_edges(
+        self, cols: npt.NDArray[np.integer], sleep: npt.NDArray[np.uint64] | None
+    ) -> tuple[npt.NDArray[np.int64], Edges]:
+        """How many transitions each column of a block enables, and the edges to fire
+        (as `fired_edges`), from the whole ``(T, n)`` enabled matrix: the counts, the
+        sleep sets and the self-loops are applied to the matrix, and only the edges
+        fired are listed (on Dekker a quarter of the enabled ones)."""
+        matrix = self.enabled(cols)
+        self.fired |= matrix.any(axis=1)
+        n_t = self.cn.n_transitions
+        small = np.uint16 if n_t < 1 << 16 else np.int64  # a bool sum in 16 bits is fast
+        counts = matrix.sum(axis=0, dtype=small).astype(np.int64)
+        if sleep is not None and self.sleep is not None:
+            self.sleep.wake(matrix, sleep)
+        if self.self_loops.size:
+            matrix[self.self_loops] = False
+        trans, src = _nonzero(matrix)
+        if self.sleep_next:  # (source, transition) order: a stable radix sort by source
+            order = np.argsort(_small(src, cols.shape[1]), kind="stable")
+            trans, src = trans.take(order), src.take(order)
+        return counts, (trans, src)
+
     def step(
         self,
         cols: npt.NDArray[np.integer],
@@ -1133,8 +1174,12 @@ class _Explorer:
         if self.reducer is not None:
             return self.reduced_step(cols, base, out)
         while True:
-            edges = self.edges_of(cols)
-            fired = self.fired_edges(edges, sleep, cols.shape[1])
+            if self.index.looked_up:
+                edges = self.edges_of(cols)
+                fired = self.fired_edges(edges, sleep, cols.shape[1])
+                counts = np.bincount(edges[1], minlength=cols.shape[1])
+            else:
+                counts, fired = self.matrix_edges(cols, sleep)
             parents = self.store.keys[base : base + cols.shape[1]]
             keys, needed = self.successor_keys(cols, parents, fired)
             if not needed:
@@ -1142,8 +1187,9 @@ class _Explorer:
             blocks = [cols, *out]
             self.widen(needed, blocks)
             cols, out[:] = blocks[0], blocks[1:]
-        self.fired[edges[0]] = True
-        self.account(np.bincount(edges[1], minlength=cols.shape[1]), base)
+        if self.index.looked_up:
+            self.fired[edges[0]] = True
+        self.account(counts, base)
         added = self.insert(cols, base, fired, out, keys)
         if self.sleep_next and self.sleep is not None and added.first.size:
             self.next_sleep.append(self.sleep.successors(sleep, fired, added.first))
