@@ -300,6 +300,13 @@ NARROW_CANDIDATES = 1 << 14
 NARROW_LEVELS = 512
 """Most layers one narrow round explores."""
 
+REPEATS_MIN = 256
+"""A narrow level of at least this many candidates, and half again as many as the
+level above, drops its repeated markings before it is expanded (`_Round.drop_repeats`):
+on nets with many enabled transitions most candidates of a level are the same few
+markings reached in different orders (Dekker: 60 enabled, 16 fired, 1 new per
+marking), and each copy would be expanded again."""
+
 KEYED_ARCS = 2
 """Transitions with at most this many input fields, one of them a component, are
 enabled by lookup (`_EnablingIndex`)..."""
@@ -315,6 +322,10 @@ every marking costs less than the lookup (Referendum, 31 transitions: 40 % slowe
 INSERT_BYTES = 64
 """Bytes of temporaries per candidate while a batch is inserted (hashes, slots,
 positions, probe results), beside its key and its successor's column."""
+
+RECORD_CELLS = 1 << 18
+"""Most (marking, field) cells `_Explorer.record_pending` decodes at once (2 MB of
+``int64``): it also runs after a search stopped at its memory limit."""
 
 BLOCK_TEMPORARIES = 64 << 20
 """Bytes of temporaries a block-wise pass over the store (a re-packing) may hold."""
@@ -494,6 +505,23 @@ class _Round:
         self.total += keys.shape[0]
         self.ends.append(self.total)
 
+    def drop_repeats(self) -> None:
+        """Keep only the first candidate of each marking of the last level, in order.
+
+        Exact: a repeat's successors are its first copy's, which the next level gets
+        anyway, at positions before the repeat's; every marking's first candidate, and
+        so the states' numbers, edges and transitions, stay the same."""
+        keys = self.keys[-1]
+        first = _first_rows(keys)
+        if first.size == keys.shape[0]:
+            return
+        self.keys[-1] = keys.take(first, axis=0)
+        self.cols[-1] = self.cols[-1].take(first, axis=1)
+        self.src[-1] = self.src[-1].take(first)
+        self.trans[-1] = self.trans[-1].take(first)
+        self.total -= keys.shape[0] - first.size
+        self.ends[-1] = self.total
+
     def joined(
         self,
     ) -> tuple[
@@ -517,6 +545,20 @@ class _Round:
             np.concatenate(self.trans),
             np.concatenate(counts),
         )
+
+
+def _first_rows(keys: npt.NDArray[np.uint64]) -> npt.NDArray[np.int64]:
+    """Positions of the first occurrence of each distinct row of ``keys`` ``(n, W)``,
+    ascending (a stable sort, then neighbours compared in full: exact)."""
+    if keys.shape[1] == 1:
+        order = np.argsort(keys[:, 0], kind="stable")
+    else:
+        order = np.lexsort(keys.T[::-1])  # stable too
+    ordered = keys.take(order, axis=0)
+    fresh = np.empty(keys.shape[0], dtype=bool)
+    fresh[:1] = True
+    np.any(ordered[1:] != ordered[:-1], axis=1, out=fresh[1:])
+    return np.sort(order[fresh])
 
 
 class _EnablingIndex:
@@ -758,6 +800,9 @@ class _Explorer:
         self.partial_fields = np.flatnonzero(fnet.partial)
         self.tokens_exact = int(np.count_nonzero(fnet.exact))  # one token in each
         self.max_marking = int(cn.initial.sum())
+        # States ``0 .. recorded - 1`` are in the bounds (`record`); the others were
+        # stored by `insert` and are recorded when unpacked (`frontier`).
+        self.recorded = 1
         self.edges = 0
         self.offered = 0  # candidates offered to the store so far
         self.layer_starts = [0]
@@ -992,6 +1037,7 @@ class _Explorer:
         # Every widening re-packs the whole store: widen in the same pass the counts
         # that overflowed before and are half full again (they grow, and often in step
         # with this one), and give spare bits to those that overflowed three times.
+        self.record_pending()  # (in the old layout: the keys are re-packed below)
         bounds = self.place_bounds()
         half_full = bounds >= self.layout.limits // 2
         again = np.flatnonzero(half_full & (self.widenings > 0))
@@ -1035,7 +1081,7 @@ class _Explorer:
         extended = np.concatenate([cols, np.zeros((1, cols.shape[1]), dtype=self.dtype)])
         values = extended.take(self.pad_fields, axis=0)
         values -= self.pad_low
-        ok = values.view(_unsigned(self.dtype)) <= self.pad_span
+        ok = values.view(self.pad_span.dtype) <= self.pad_span
         enabled: npt.NDArray[np.bool_] = np.logical_and.reduce(ok.reshape(width, n_t, -1))
         return enabled
 
@@ -1091,8 +1137,11 @@ class _Explorer:
         keys: npt.NDArray[np.uint64] | None = None,
         want_ids: bool = False,
     ) -> Added:
-        """Store the successors along ``edges`` (their ``keys`` if already computed);
-        new columns go to ``out``."""
+        """Store the successors along ``edges`` (their ``keys`` if already computed).
+
+        The new states get no columns here: their bounds are recorded when they are
+        unpacked as the frontier (`frontier`, `record_pending`), which every stored
+        state is once; only ``stop_when`` needs their markings now."""
         trans, src = edges
         self.guard_insert(trans.size)
         if keys is None:
@@ -1103,10 +1152,9 @@ class _Explorer:
         first = added.first
         if first.size:
             self.via.append(trans.take(first).astype(self.via_type))
-            new = self.successor_cols(cols, src.take(first), trans.take(first))
-            out.append(new)
-            self.record(new)
-            self.offer(new, added.start)
+            if self.stop_when is not None:
+                new = self.successor_cols(cols, src.take(first), trans.take(first))
+                self.offer(new, added.start)
         if added.cut:
             self.stopped = work_limit_reason(self.max_states or 0, "state")
         return added
@@ -1304,8 +1352,26 @@ class _Explorer:
                 self.layer_starts.append(base)
 
     def frontier(self, start: int, n: int) -> npt.NDArray[np.integer]:
-        """Field columns of the states ``start .. start + n - 1``, from their keys."""
-        return self.layout.fields(self.store.keys[start : start + n], self.dtype)
+        """Field columns of the states ``start .. start + n - 1``, from their keys; the
+        ones not yet recorded (`record`) are recorded now."""
+        cols = self.layout.fields(self.store.keys[start : start + n], self.dtype)
+        if start + n > self.recorded:
+            self.record_pending(start)
+            self.record(cols[:, self.recorded - start :])
+            self.recorded = start + n
+        return cols
+
+    def record_pending(self, end: int | None = None) -> None:
+        """`record` the stored states from ``recorded`` up to ``end`` (default: all),
+        unpacked from their keys a block at a time."""
+        end = self.store.size if end is None else end
+        # small blocks: this also runs after a search stopped at its memory limit
+        step = max(1, RECORD_CELLS // max(1, self.fnet.n_fields))
+        while self.recorded < end:
+            n = min(step, end - self.recorded)
+            keys = self.store.keys[self.recorded : self.recorded + n]
+            self.record(self.layout.fields(keys, self.dtype))
+            self.recorded += n
 
     def narrow(self, width: int) -> bool:
         """Whether a layer of ``width`` markings is explored by a narrow round: few
@@ -1337,21 +1403,34 @@ class _Explorer:
             current, keys = cols, self.store.keys[base : base + cols.shape[1]]
             budget = min(NARROW_CANDIDATES, self.chunk)  # `chunk` bounds work between checks
             needed: dict[int, int] = {}
+            above = cols.shape[1]  # width of the level above ``current``...
+            produced = 0  # ... and the candidates expanding it gave
             while len(spec.keys) < NARROW_LEVELS:
                 width = current.shape[1]
+                if spec.keys and width >= REPEATS_MIN and 2 * width > 3 * above:
+                    spec.drop_repeats()
+                    current, keys = spec.cols[-1], spec.keys[-1]
+                    width = current.shape[1]
                 # too wide to expand in one go, or (lookups make levels cheap) so wide
                 # that unchecked duplicates pile up: the next frontier
                 wide = width * self.tested > CELLS_PER_STEP
                 if spec.keys and (wide or (self.index.looked_up and width > NARROW_WIDTH)):
                     break
+                # a level expected to pass the round's budget by itself: the store
+                # dedupes it more cheaply than another level would (Dekker's last
+                # layers: 15 markings, 508,440 candidates two levels down)
+                if spec.keys and spec.total * above + width * produced > budget * above:
+                    break
+                above = width
                 self.guard(width * self.tested)  # the deadline, between levels too
                 every, cells = self.narrow_edges(current)
                 counts = np.bincount(every[1], minlength=current.shape[1])
                 trans, src = self.fired_edges(every, None, current.shape[1])
                 level = src.size * (self.fnet.n_fields * self.dtype.itemsize + 24)
-                temporaries, grown = self.insert_bytes(spec.total + src.size)
-                if spec.keys and not self.fits(level + temporaries, grown):
-                    break  # store the levels so far instead: their candidates are fewer
+                if spec.keys and self.budget.memory is not None:  # (a cost per level)
+                    temporaries, grown = self.insert_bytes(spec.total + src.size)
+                    if not self.fits(level + temporaries, grown):
+                        break  # store the levels so far instead: their candidates are fewer
                 self.guard(level)
                 new = self.successor_cols(current, src, trans)
                 over = new > self.last_value
@@ -1361,6 +1440,7 @@ class _Explorer:
                     needed = _largest(self.fnet.count_place[field], reached)
                     break
                 self.fired[every[0]] = True
+                produced = src.size
                 keys = keys.take(src, axis=0)
                 keys += self.key_delta.take(trans, axis=0)
                 spec.add(counts, new, keys, src, trans, cells)
@@ -1389,7 +1469,9 @@ class _Explorer:
         self.account(spec.counts[0], base)
         self.via.append(trans.take(first).astype(self.via_type))
         new = new_cols.take(first, axis=1)
+        self.record_pending(start)
         self.record(new)
+        self.recorded = start + first.size
         self.offer(new, start)
         enables = counts.take(first)
         expanded = int(np.count_nonzero(enables >= 0))  # all but the last level's
@@ -1777,6 +1859,10 @@ def _explore(
     except BudgetExceeded:  # a budget ran out; the reason is recorded
         pass
     except MemoryError:  # an allocation failed (memory limit or ceiling): say so, keep the rest
+        explorer.stopped = memory_limit_reason(budget.memory, explorer.store.size)
+    try:
+        explorer.record_pending()  # the bounds of the states stored but not expanded
+    except MemoryError:  # (a few MB at most, after a search that ran out of memory)
         explorer.stopped = memory_limit_reason(budget.memory, explorer.store.size)
     seconds = budget.clock() - explorer.start
     store = explorer.store
