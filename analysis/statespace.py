@@ -692,7 +692,10 @@ class _EnablingIndex:
         field ``keyed[k][0]`` holding ``v`` lists ``listed[start[base[k] + v] :
         start[base[k] + v + 1]]``."""
         self.key_fields = np.array([f for f, _, _ in self.keyed], dtype=np.int64)
-        starts, lists, base, offset = [], [], [], 0
+        starts: list[npt.NDArray[np.int64]] = []
+        lists: list[npt.NDArray[np.int64]] = []
+        base: list[int] = []
+        offset = 0
         for _, start, listed in self.keyed:
             base.append(sum(part.size for part in starts))
             starts.append(start[:-1] + offset)
