@@ -400,6 +400,12 @@ class SleepSets:
             within = 7 - within
         self.byte = (tracked // 64) * 8 + within
         self.byte_bit = np.left_shift(1, tracked % 8).astype(np.uint8)[:, None]
+        # below[t]: the tracked transitions before t, as sleep bits
+        below = np.zeros((n_t, self.words), dtype=np.uint64)
+        low_bits = np.left_shift(np.uint64(1), (t % 64).astype(np.uint64)) - np.uint64(1)
+        for k in range(self.words):
+            below[:, k] = np.where(t // 64 > k, ~np.uint64(0), np.where(t // 64 == k, low_bits, 0))
+        self.below = below & self._everything()
 
     def _masks(
         self, cn: CompactNet, rows: npt.NDArray[np.int64], places: npt.NDArray[np.int64]
@@ -425,10 +431,27 @@ class SleepSets:
         dependent = flat.reshape(n_t, w)
         own = np.arange(n_t) < self.tracked
         dependent[own, self.word[own]] |= self.bit[own]
-        everything = np.zeros(w, dtype=np.uint64)
+        return ~dependent & self._everything()
+
+    def _everything(self) -> npt.NDArray[np.uint64]:
+        """The bits of all tracked transitions."""
+        everything = np.zeros(self.words, dtype=np.uint64)
         for t in range(self.tracked):
             everything[t // 64] |= np.uint64(1 << (t % 64))
-        return ~dependent & everything
+        return everything
+
+    def fired_sets(self, fired: npt.NDArray[np.bool_]) -> npt.NDArray[np.uint64]:
+        """``(n, words)``: per column of a block's ``(T, n)`` matrix of fired edges, the
+        tracked transitions fired, as sleep bits (8 shifts over bytes)."""
+        n = fired.shape[1]
+        padded = np.zeros((64 * self.words, n), dtype=np.uint8)
+        padded[: self.tracked] = fired[: self.tracked]
+        by_bit = padded.reshape(8 * self.words, 8, n)
+        packed = by_bit[:, 0].copy()
+        for i in range(1, 8):
+            packed |= by_bit[:, i] << np.uint8(i)
+        little = np.ascontiguousarray(packed.T).view("<u8")
+        return little.astype(np.uint64, copy=False)
 
     def awake(self, sleep: npt.NDArray[np.uint64], edges: Edges) -> npt.NDArray[np.bool_]:
         """Which edges are not asleep; ``sleep`` is ``(n, words)`` for the block."""
@@ -456,11 +479,21 @@ class SleepSets:
         sleep: npt.NDArray[np.uint64] | None,
         edges: Edges,
         first: npt.NDArray[np.int64],
+        fired: npt.NDArray[np.uint64] | None = None,
     ) -> npt.NDArray[np.uint64]:
         """Sleep sets ``(len(first), words)`` of the new states found by the fired
-        ``edges`` at positions ``first``, which are in (source, transition) order."""
+        ``edges`` at positions ``first``, which are in (source, transition) order;
+        ``fired`` (`fired_sets`), when given, says which transitions each source fired:
+        then the work is per new state, not per edge."""
         trans, src = edges
         rep_t, rep_s = trans.take(first), src.take(first)
+        if fired is not None:
+            out = fired.take(rep_s, axis=0)
+            out &= self.below.take(rep_t, axis=0)
+            if sleep is not None:
+                out |= sleep.take(rep_s, axis=0)
+            out &= self.independent.take(rep_t, axis=0)
+            return out
         # The fired transitions of the same source before each first arrival are the
         # enabled u < s (asleep ones are in sleep(p)): an exclusive prefix OR of their
         # bits within the source's run, computed as a prefix sum (the bits are distinct).
@@ -1209,11 +1242,12 @@ class _Explorer:
 
     def matrix_edges(
         self, cols: npt.NDArray[np.integer], sleep: npt.NDArray[np.uint64] | None
-    ) -> tuple[npt.NDArray[np.int64], Edges]:
+    ) -> tuple[npt.NDArray[np.int64], Edges, npt.NDArray[np.uint64] | None]:
         """How many transitions each column of a block enables, and the edges to fire
         (as `fired_edges`), from the whole ``(T, n)`` enabled matrix: the counts, the
         sleep sets and the self-loops are applied to the matrix, and only the edges
-        fired are listed (on Dekker a quarter of the enabled ones)."""
+        fired are listed (on Dekker a quarter of the enabled ones). When the next layer
+        gets sleep sets, also the transitions each column fired (`SleepSets.fired_sets`)."""
         matrix = self.enabled(cols)
         self.fired |= matrix.any(axis=1)
         n_t = self.cn.n_transitions
@@ -1227,7 +1261,10 @@ class _Explorer:
         if self.sleep_next:  # (source, transition) order: a stable radix sort by source
             order = np.argsort(_small(src, cols.shape[1]), kind="stable")
             trans, src = trans.take(order), src.take(order)
-        return counts, (trans, src)
+        sets = None
+        if self.sleep_next and self.sleep is not None:
+            sets = self.sleep.fired_sets(matrix)
+        return counts, (trans, src), sets
 
     def step(
         self,
@@ -1251,8 +1288,9 @@ class _Explorer:
                 edges = self.edges_of(cols)
                 fired = self.fired_edges(edges, sleep, cols.shape[1])
                 counts = np.bincount(edges[1], minlength=cols.shape[1])
+                sets = None
             else:
-                counts, fired = self.matrix_edges(cols, sleep)
+                counts, fired, sets = self.matrix_edges(cols, sleep)
             parents = self.store.keys[base : base + cols.shape[1]]
             keys, needed = self.successor_keys(cols, parents, fired)
             if not needed:
@@ -1273,7 +1311,7 @@ class _Explorer:
             added = self.insert(cols, base, offered, out, keys.take(kept, axis=0))
             first = kept.take(added.first)
         if self.sleep_next and self.sleep is not None and first.size:
-            self.next_sleep.append(self.sleep.successors(sleep, fired, first))
+            self.next_sleep.append(self.sleep.successors(sleep, fired, first, sets))
         return cols
 
     def unrepeated(self, keys: npt.NDArray[np.uint64]) -> npt.NDArray[np.int64] | None:
@@ -1288,8 +1326,8 @@ class _Explorer:
         repeat: Dekker offers 4 million keys for 280,000 states, 5 of 6 repeats
         within their step."""
         m = keys.shape[0]
-        if keys.shape[1] != 1 or m < REPEAT_FILTER_MIN:
-            return None
+        if keys.shape[1] != 1 or not REPEAT_FILTER_MIN <= m <= EDGES_PER_STEP * 4:
+            return None  # (the table, 8 to 16 bytes a key, stays a temporary of a step)
         if self.edges < REPEAT_FILTER_DEGREE * self.store.size:
             return None  # (few enabled transitions per marking: few repeats)
         bits = max(10, int(m - 1).bit_length() + 1)  # a table two to four times m
