@@ -143,6 +143,10 @@ def _components_by_elimination(cn: CompactNet, budget: Budget) -> list[IntArray]
         touched = pos + neg
         if not touched.any():
             break
+        if 2 * np.count_nonzero(touched) < touched.size:  # most columns done: drop them
+            live = touched > 0
+            residual = np.ascontiguousarray(residual[:, live])
+            pos, neg, touched = pos[live], neg[live], touched[live]
         # the cheapest column to eliminate (fewest new rows), the first on ties
         cost = np.where(touched > 0, pos * neg - touched, np.iinfo(np.int64).max)
         t = int(np.argmin(cost))
