@@ -333,6 +333,12 @@ RECORD_CELLS = 1 << 18
 BLOCK_TEMPORARIES = 64 << 20
 """Bytes of temporaries a block-wise pass over the store (a re-packing) may hold."""
 
+GUARD_MIN_BYTES = 1 << 20
+"""Smallest allocation `_Explorer.guard` checks against the memory limit (reading the
+process's memory costs about 50 us: DoubleExponent-PT-003's 18,128 narrow levels took
+2.3x as long with a limit as without); smaller ones are left to the budget's own
+periodic check (`Budget.expired`)."""
+
 REPEAT_FILTER_MIN = 1 << 12
 """Fewest successor keys of a step worth filtering for repeats (`_Explorer.unrepeated`)..."""
 
@@ -1507,6 +1513,7 @@ class _Explorer:
             current, keys = cols, self.store.keys[base : base + cols.shape[1]]
             budget = min(NARROW_CANDIDATES, self.chunk)  # `chunk` bounds work between checks
             needed: dict[int, int] = {}
+            checked = 0  # candidates when the round's memory was last checked
             above = cols.shape[1]  # width of the level above ``current``...
             produced = 0  # ... and the candidates expanding it gave
             while len(spec.keys) < NARROW_LEVELS:
@@ -1531,7 +1538,10 @@ class _Explorer:
                 counts = np.bincount(every[1], minlength=current.shape[1])
                 trans, src = self.fired_edges(every, None, current.shape[1])
                 level = src.size * (self.fnet.n_fields * self.dtype.itemsize + 24)
-                if spec.keys and self.budget.memory is not None:  # (a cost per level)
+                # with a memory limit, each time the round's candidates double (reading
+                # the process's memory every level cost more than the levels)
+                if spec.keys and self.budget.memory is not None and spec.total >= 2 * checked:
+                    checked = spec.total
                     temporaries, grown = self.insert_bytes(spec.total + src.size)
                     if not self.fits(level + temporaries, grown):
                         break  # store the levels so far instead: their candidates are fewer
@@ -1636,7 +1646,7 @@ class _Explorer:
         if budget.expired():
             self.stopped = budget.time_reason(self.store.size, "state")
             raise BudgetExceeded(self.stopped)
-        if budget.memory is not None and extra_bytes + grown_bytes > 0:
+        if budget.memory is not None and extra_bytes + grown_bytes >= GUARD_MIN_BYTES:
             try:
                 budget.check_memory(max(0, extra_bytes - heap_free_bytes()) + grown_bytes)
             except BudgetExceeded:
