@@ -10,16 +10,19 @@ Breadth first, one layer at a time, vectorised over the frontier with numpy:
    (`_EnablingIndex`);
 2. *sleep sets* (`SleepSets`) drop the edges whose successor another edge is sure to
    reach in the same layer, typically three quarters of them on concurrent nets: only
-   the others are fired;
+   the others are fired (where the whole enabled matrix is built, counts, sleep sets
+   and self-loops are applied to the matrix and only the fired entries are listed);
 3. each fired edge yields its successor's *packed key* by one addition per key word
    (see `analysis.encoding.Layout`; one-hot components make most markings one word),
    never a full row;
 4. the keys go through a vectorised open-addressing set (`KeyStore`) that numbers new
    markings as they are first met, so state numbers grow with BFS depth
-   (``layer_starts``) and parents always precede their children;
-5. only new markings get a column (``parent column + delta``), for the bounds; the
-   next layer is not kept as columns but unpacked from the stored keys a block at a
-   time (`Layout.fields`): the states of a layer are numbered consecutively.
+   (``layer_starts``) and parents always precede their children; on nets with several
+   enabled transitions per marking a cheap direct-mapped table drops most repeats of
+   a step first (`_Explorer.unrepeated`), keeping every first occurrence in order;
+5. new markings get no columns: the next layer is unpacked from the stored keys a
+   block at a time (`Layout.fields`; the states of a layer are numbered
+   consecutively), and the bounds are recorded then (`_Explorer.frontier`).
 
 Narrow layers (deep state spaces: long missions, counters) are explored several layers
 per insertion instead, see `_Explorer.speculate`: numpy's cost per call, not per
@@ -52,6 +55,7 @@ Typical use::
 from __future__ import annotations
 
 import ctypes
+import sys
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
@@ -304,6 +308,13 @@ NARROW_CANDIDATES = 1 << 14
 NARROW_LEVELS = 512
 """Most layers one narrow round explores."""
 
+REPEATS_MIN = 256
+"""A narrow level of at least this many candidates, and half again as many as the
+level above, drops its repeated markings before it is expanded (`_Round.drop_repeats`):
+on nets with many enabled transitions most candidates of a level are the same few
+markings reached in different orders (Dekker: 60 enabled, 16 fired, 1 new per
+marking), and each copy would be expanded again."""
+
 KEYED_ARCS = 2
 """Transitions with at most this many input fields, one of them a component, are
 enabled by lookup (`_EnablingIndex`)..."""
@@ -320,11 +331,27 @@ INSERT_BYTES = 64
 """Bytes of temporaries per candidate while a batch is inserted (hashes, slots,
 positions, probe results), beside its key and its successor's column."""
 
+RECORD_CELLS = 1 << 18
+"""Most (marking, field) cells `_Explorer.record_pending` decodes at once (2 MB of
+``int64``): it also runs after a search stopped at its memory limit."""
+
 BLOCK_TEMPORARIES = 64 << 20
 """Bytes of temporaries a block-wise pass over the store (a re-packing) may hold."""
 
 PACK_WIDE_KEYS = False
 """Whether keys of several words are stored byte-granular too (see `_stored_bytes`)."""
+
+GUARD_MIN_BYTES = 1 << 20
+"""Smallest allocation `_Explorer.guard` checks against the memory limit (reading the
+process's memory costs about 50 us: DoubleExponent-PT-003's 18,128 narrow levels took
+2.3x as long with a limit as without); smaller ones are left to the budget's own
+periodic check (`Budget.expired`)."""
+
+REPEAT_FILTER_MIN = 1 << 12
+"""Fewest successor keys of a step worth filtering for repeats (`_Explorer.unrepeated`)..."""
+
+REPEAT_FILTER_DEGREE = 2.0
+"""... on nets whose markings enable at least this many transitions on average."""
 
 DENSE_DELTA_CELLS = 1 << 24
 """Largest places x transitions for a dense effect matrix (successor columns by one
@@ -379,6 +406,20 @@ class SleepSets:
         self.bit = np.where(inside, np.left_shift(np.uint64(1), (t % 64).astype(np.uint64)), 0)
         self.bit = self.bit.astype(np.uint64)
         self.independent = self._independence(cn)
+        # `wake` reads the sleep bits a byte at a time: tracked transition ``t`` is bit
+        # ``t % 8`` of byte ``byte[t]`` of its marking's ``8 * words`` bytes.
+        tracked = np.arange(self.tracked)
+        within = (tracked % 64) // 8
+        if sys.byteorder == "big":
+            within = 7 - within
+        self.byte = (tracked // 64) * 8 + within
+        self.byte_bit = np.left_shift(1, tracked % 8).astype(np.uint8)[:, None]
+        # below[t]: the tracked transitions before t, as sleep bits
+        below = np.zeros((n_t, self.words), dtype=np.uint64)
+        low_bits = np.left_shift(np.uint64(1), (t % 64).astype(np.uint64)) - np.uint64(1)
+        for k in range(self.words):
+            below[:, k] = np.where(t // 64 > k, ~np.uint64(0), np.where(t // 64 == k, low_bits, 0))
+        self.below = below & self._everything()
 
     def _masks(
         self, cn: CompactNet, rows: npt.NDArray[np.int64], places: npt.NDArray[np.int64]
@@ -404,10 +445,27 @@ class SleepSets:
         dependent = flat.reshape(n_t, w)
         own = np.arange(n_t) < self.tracked
         dependent[own, self.word[own]] |= self.bit[own]
-        everything = np.zeros(w, dtype=np.uint64)
+        return ~dependent & self._everything()
+
+    def _everything(self) -> npt.NDArray[np.uint64]:
+        """The bits of all tracked transitions."""
+        everything = np.zeros(self.words, dtype=np.uint64)
         for t in range(self.tracked):
             everything[t // 64] |= np.uint64(1 << (t % 64))
-        return ~dependent & everything
+        return everything
+
+    def fired_sets(self, fired: npt.NDArray[np.bool_]) -> npt.NDArray[np.uint64]:
+        """``(n, words)``: per column of a block's ``(T, n)`` matrix of fired edges, the
+        tracked transitions fired, as sleep bits (8 shifts over bytes)."""
+        n = fired.shape[1]
+        padded = np.zeros((64 * self.words, n), dtype=np.uint8)
+        padded[: self.tracked] = fired[: self.tracked]
+        by_bit = padded.reshape(8 * self.words, 8, n)
+        packed = by_bit[:, 0].copy()
+        for i in range(1, 8):
+            packed |= by_bit[:, i] << np.uint8(i)
+        little = np.ascontiguousarray(packed.T).view("<u8")
+        return little.astype(np.uint64, copy=False)
 
     def awake(self, sleep: npt.NDArray[np.uint64], edges: Edges) -> npt.NDArray[np.bool_]:
         """Which edges are not asleep; ``sleep`` is ``(n, words)`` for the block."""
@@ -420,16 +478,36 @@ class SleepSets:
         awake: npt.NDArray[np.bool_] = word == 0
         return awake
 
+    def wake(self, enabled: npt.NDArray[np.bool_], sleep: npt.NDArray[np.uint64]) -> None:
+        """Clear the asleep entries of a block's ``(T, n)`` enabled matrix (``sleep`` is
+        ``(n, words)``): `awake` on the matrix, a few passes over bytes instead of a
+        gather per edge (Dekker enables 60 transitions per marking and fires 16)."""
+        n = sleep.shape[0]
+        per_byte = np.ascontiguousarray(sleep).view(np.uint8).reshape(n, 8 * self.words)
+        bits = np.ascontiguousarray(per_byte.T).take(self.byte, axis=0)
+        bits &= self.byte_bit
+        enabled[: self.tracked] &= bits == 0
+
     def successors(
         self,
         sleep: npt.NDArray[np.uint64] | None,
         edges: Edges,
         first: npt.NDArray[np.int64],
+        fired: npt.NDArray[np.uint64] | None = None,
     ) -> npt.NDArray[np.uint64]:
         """Sleep sets ``(len(first), words)`` of the new states found by the fired
-        ``edges`` at positions ``first``, which are in (source, transition) order."""
+        ``edges`` at positions ``first``, which are in (source, transition) order;
+        ``fired`` (`fired_sets`), when given, says which transitions each source fired:
+        then the work is per new state, not per edge."""
         trans, src = edges
         rep_t, rep_s = trans.take(first), src.take(first)
+        if fired is not None:
+            out = fired.take(rep_s, axis=0)
+            out &= self.below.take(rep_t, axis=0)
+            if sleep is not None:
+                out |= sleep.take(rep_s, axis=0)
+            out &= self.independent.take(rep_t, axis=0)
+            return out
         # The fired transitions of the same source before each first arrival are the
         # enabled u < s (asleep ones are in sleep(p)): an exclusive prefix OR of their
         # bits within the source's run, computed as a prefix sum (the bits are distinct).
@@ -508,6 +586,23 @@ class _Round:
         self.total += keys.shape[0]
         self.ends.append(self.total)
 
+    def drop_repeats(self) -> None:
+        """Keep only the first candidate of each marking of the last level, in order.
+
+        Exact: a repeat's successors are its first copy's, which the next level gets
+        anyway, at positions before the repeat's; every marking's first candidate, and
+        so the states' numbers, edges and transitions, stay the same."""
+        keys = self.keys[-1]
+        first = _first_rows(keys)
+        if first.size == keys.shape[0]:
+            return
+        self.keys[-1] = keys.take(first, axis=0)
+        self.cols[-1] = self.cols[-1].take(first, axis=1)
+        self.src[-1] = self.src[-1].take(first)
+        self.trans[-1] = self.trans[-1].take(first)
+        self.total -= keys.shape[0] - first.size
+        self.ends[-1] = self.total
+
     def joined(
         self,
     ) -> tuple[
@@ -531,6 +626,20 @@ class _Round:
             np.concatenate(self.trans),
             np.concatenate(counts),
         )
+
+
+def _first_rows(keys: npt.NDArray[np.uint64]) -> npt.NDArray[np.int64]:
+    """Positions of the first occurrence of each distinct row of ``keys`` ``(n, W)``,
+    ascending (a stable sort, then neighbours compared in full: exact)."""
+    if keys.shape[1] == 1:
+        order = np.argsort(keys[:, 0], kind="stable")
+    else:
+        order = np.lexsort(keys.T[::-1])  # stable too
+    ordered = keys.take(order, axis=0)
+    fresh = np.empty(keys.shape[0], dtype=bool)
+    fresh[:1] = True
+    np.any(ordered[1:] != ordered[:-1], axis=1, out=fresh[1:])
+    return np.sort(order[fresh])
 
 
 class _EnablingIndex:
@@ -600,6 +709,7 @@ class _EnablingIndex:
         self.keyed = self._lists(
             keyed_t, fields[keyed_t, key[keyed_t]], low[keyed_t, key[keyed_t]], values
         )
+        self._join_lists()
         self.rest_width = max(0, width - 1)
         take = np.zeros((n_t, 0), dtype=np.int64)
         if width:  # every arc column but the key's
@@ -649,24 +759,38 @@ class _EnablingIndex:
             keyed.append((int(f), start, trans[sel][order]))
         return keyed
 
+    def _join_lists(self) -> None:
+        """The lists of `keyed` as one (`candidates` looks every key field up at once):
+        field ``keyed[k][0]`` holding ``v`` lists ``listed[start[base[k] + v] :
+        start[base[k] + v + 1]]``."""
+        self.key_fields = np.array([f for f, _, _ in self.keyed], dtype=np.int64)
+        starts: list[npt.NDArray[np.int64]] = []
+        lists: list[npt.NDArray[np.int64]] = []
+        base: list[int] = []
+        offset = 0
+        for _, start, listed in self.keyed:
+            base.append(sum(part.size for part in starts))
+            starts.append(start[:-1] + offset)
+            lists.append(listed)
+            offset += listed.size
+        self.key_base = np.array(base, dtype=np.int64)[:, None]
+        self.key_start = np.concatenate([*starts, np.array([offset], dtype=np.int64)])
+        self.key_listed = np.concatenate(lists) if lists else np.zeros(0, dtype=np.int64)
+
     def candidates(self, cols: npt.NDArray[np.integer]) -> Edges:
-        """The (transition, column) pairs whose key test passes, per key field."""
+        """The (transition, column) pairs whose key test passes, by key field, then
+        column: one lookup for all key fields (a dozen numpy calls, not a dozen per
+        field: TokenRing's narrow levels have 11 key fields and a few markings)."""
         n = cols.shape[1]
-        trans: list[npt.NDArray[np.int64]] = []
-        src: list[npt.NDArray[np.int64]] = []
-        for key, start, listed in self.keyed:
-            value = cols[key].astype(np.int64)
-            first = start.take(value)
-            count = start.take(value + 1) - first
-            total = int(count.sum())
-            if not total:
-                continue
-            offsets = np.cumsum(count) - count - first
-            trans.append(listed.take(np.arange(total) - np.repeat(offsets, count)))
-            src.append(np.repeat(np.arange(n), count))
-        if not trans:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        return np.concatenate(trans), np.concatenate(src)
+        at = cols.take(self.key_fields, axis=0).astype(np.int64)
+        at += self.key_base
+        at = at.reshape(-1)
+        first = self.key_start.take(at)
+        count = self.key_start.take(at + 1) - first
+        total = int(count.sum())
+        offsets = np.cumsum(count) - count - first
+        trans = self.key_listed.take(np.arange(total) - np.repeat(offsets, count))
+        return trans, np.repeat(np.arange(at.size) % max(1, n), count)
 
 
 class _CountKeys:
@@ -777,8 +901,12 @@ class _Explorer:
         self.partial_fields = np.flatnonzero(fnet.partial)
         self.tokens_exact = int(np.count_nonzero(fnet.exact))  # one token in each
         self.max_marking = int(cn.initial.sum())
+        # States ``0 .. recorded - 1`` are in the bounds (`record`); the others were
+        # stored by `insert` and are recorded when unpacked (`frontier`).
+        self.recorded = 1
         self.edges = 0
         self.offered = 0  # candidates offered to the store so far
+        self.repeat_table = np.empty(0, dtype=np.int32)  # see `unrepeated`
         self.layer_starts = [0]
         self.stopped: str | None = None
         wanted = sleep_sets and reducer is None and cn.n_transitions > 1
@@ -1011,6 +1139,7 @@ class _Explorer:
         # Every widening re-packs the whole store: widen in the same pass the counts
         # that overflowed before and are half full again (they grow, and often in step
         # with this one), and give spare bits to those that overflowed three times.
+        self.record_pending()  # (in the old layout: the keys are re-packed below)
         bounds = self.place_bounds()
         half_full = bounds >= self.layout.limits // 2
         again = np.flatnonzero(half_full & (self.widenings > 0))
@@ -1053,7 +1182,7 @@ class _Explorer:
         extended = np.concatenate([cols, np.zeros((1, cols.shape[1]), dtype=self.dtype)])
         values = extended.take(self.pad_fields, axis=0)
         values -= self.pad_low
-        ok = values.view(_unsigned(self.dtype)) <= self.pad_span
+        ok = values.view(self.pad_span.dtype) <= self.pad_span
         enabled: npt.NDArray[np.bool_] = np.logical_and.reduce(ok.reshape(width, n_t, -1))
         return enabled
 
@@ -1109,8 +1238,11 @@ class _Explorer:
         keys: npt.NDArray[np.uint64] | None = None,
         want_ids: bool = False,
     ) -> Added:
-        """Store the successors along ``edges`` (their ``keys`` if already computed);
-        new columns go to ``out``."""
+        """Store the successors along ``edges`` (their ``keys`` if already computed).
+
+        The new states get no columns here: their bounds are recorded when they are
+        unpacked as the frontier (`frontier`, `record_pending`), which every stored
+        state is once; only ``stop_when`` needs their markings now."""
         trans, src = edges
         self.guard_insert(trans.size)
         if keys is None:
@@ -1121,10 +1253,9 @@ class _Explorer:
         first = added.first
         if first.size:
             self.via.append(trans.take(first).astype(self.via_type))
-            new = self.successor_cols(cols, src.take(first), trans.take(first))
-            out.append(new)
-            self.record(new)
-            self.offer(new, added.start)
+            if self.stop_when is not None:
+                new = self.successor_cols(cols, src.take(first), trans.take(first))
+                self.offer(new, added.start)
         if added.cut:
             self.stopped = work_limit_reason(self.max_states or 0, "state")
         return added
@@ -1152,6 +1283,36 @@ class _Explorer:
             trans, src = trans.take(order), src.take(order)
         return trans, src
 
+    def matrix_edges(
+        self, cols: npt.NDArray[np.integer], sleep: npt.NDArray[np.uint64] | None
+    ) -> tuple[npt.NDArray[np.int64], Edges, npt.NDArray[np.uint64] | None]:
+        """How many transitions each column of a block enables, and the edges to fire
+        (as `fired_edges`), from the whole ``(T, n)`` enabled matrix: the counts, the
+        sleep sets and the self-loops are applied to the matrix, and only the edges
+        fired are listed (on Dekker a quarter of the enabled ones). When the next layer
+        gets sleep sets, also the transitions each column fired (`SleepSets.fired_sets`)."""
+        matrix = self.enabled(cols)
+        self.fired |= matrix.any(axis=1)
+        n_t = self.cn.n_transitions
+        small = np.uint16 if n_t < 1 << 16 else np.int64  # a bool sum in 16 bits is fast
+        counts = matrix.sum(axis=0, dtype=small).astype(np.int64)
+        if sleep is not None and self.sleep is not None:
+            self.sleep.wake(matrix, sleep)
+        if self.self_loops.size:
+            matrix[self.self_loops] = False
+        trans, src = _nonzero(matrix)
+        if self.sleep_next:  # (source, transition) order: a stable radix sort by source
+            order = np.argsort(_small(src, cols.shape[1]), kind="stable")
+            trans, src = trans.take(order), src.take(order)
+        sets = None
+        # per new state from the matrix (a few passes over its bytes), or per fired
+        # edge (a prefix sum per key word): whichever touches less (Dekker: the matrix,
+        # 16 of 255 fired; SharedMemory: the edges, 3 of 210)
+        sleep_sets = self.sleep if self.sleep_next else None
+        if sleep_sets is not None and 4 * trans.size * sleep_sets.words >= matrix.size:
+            sets = sleep_sets.fired_sets(matrix)
+        return counts, (trans, src), sets
+
     def step(
         self,
         cols: npt.NDArray[np.integer],
@@ -1170,8 +1331,13 @@ class _Explorer:
         if self.reducer is not None:
             return self.reduced_step(cols, base, out)
         while True:
-            edges = self.edges_of(cols)
-            fired = self.fired_edges(edges, sleep, cols.shape[1])
+            if self.index.looked_up:
+                edges = self.edges_of(cols)
+                fired = self.fired_edges(edges, sleep, cols.shape[1])
+                counts = np.bincount(edges[1], minlength=cols.shape[1])
+                sets = None
+            else:
+                counts, fired, sets = self.matrix_edges(cols, sleep)
             parents = self.store.keys[base : base + cols.shape[1]]
             keys, needed = self.successor_keys(cols, parents, fired)
             if not needed:
@@ -1179,12 +1345,50 @@ class _Explorer:
             blocks = [cols, *out]
             self.widen(needed, blocks)
             cols, out[:] = blocks[0], blocks[1:]
-        self.fired[edges[0]] = True
-        self.account(np.bincount(edges[1], minlength=cols.shape[1]), base)
-        added = self.insert(cols, base, fired, out, keys)
-        if self.sleep_next and self.sleep is not None and added.first.size:
-            self.next_sleep.append(self.sleep.successors(sleep, fired, added.first))
+        if self.index.looked_up:
+            self.fired[edges[0]] = True
+        self.account(counts, base)
+        assert keys is not None
+        kept = self.unrepeated(keys)
+        if kept is None:
+            added = self.insert(cols, base, fired, out, keys)
+            first = added.first
+        else:
+            offered = fired[0].take(kept), fired[1].take(kept)
+            added = self.insert(cols, base, offered, out, keys.take(kept, axis=0))
+            first = kept.take(added.first)
+        if self.sleep_next and self.sleep is not None and first.size:
+            self.next_sleep.append(self.sleep.successors(sleep, fired, first, sets))
         return cols
+
+    def unrepeated(self, keys: npt.NDArray[np.uint64]) -> npt.NDArray[np.int64] | None:
+        """Positions of ``keys`` to offer to the store, ascending: all but most repeats
+        of an earlier key of the same step, or None for all of them.
+
+        One pass through a direct-mapped table (a slot per hash, the first key that
+        hashes there wins): a key equal to its slot's winner is a repeat. Exact, as
+        the store sees every key's first occurrence, in order, so it numbers the same
+        states the same way; a repeat in another slot's shadow is left to the store.
+        Several times cheaper per key than the store's probing, it pays where keys
+        repeat: Dekker offers 4 million keys for 280,000 states, 5 of 6 repeats
+        within their step."""
+        m = keys.shape[0]
+        if keys.shape[1] != 1 or not REPEAT_FILTER_MIN <= m <= EDGES_PER_STEP * 4:
+            return None  # (the table, 8 to 16 bytes a key, stays a temporary of a step)
+        if self.edges < REPEAT_FILTER_DEGREE * self.store.size:
+            return None  # (few enabled transitions per marking: few repeats)
+        bits = max(10, int(m - 1).bit_length() + 1)  # a table two to four times m
+        if self.repeat_table.size < 1 << bits:
+            self.repeat_table = np.empty(1 << bits, dtype=np.int32)
+        flat = keys.reshape(-1)
+        slot = flat * np.uint64(0x9E3779B97F4A7C15)
+        slot >>= np.uint64(64 - bits)
+        # written backwards: the last write, the first key of each slot, stays
+        self.repeat_table[slot[::-1]] = np.arange(m - 1, -1, -1, dtype=np.int32)
+        winner = self.repeat_table.take(slot)
+        repeat = flat.take(winner) == flat
+        repeat &= winner != np.arange(m, dtype=np.int32)  # (m < 2**31: a step's edges)
+        return np.flatnonzero(~repeat)
 
     def reduced_step(
         self,
@@ -1299,8 +1503,26 @@ class _Explorer:
                 self.layer_starts.append(base)
 
     def frontier(self, start: int, n: int) -> npt.NDArray[np.integer]:
-        """Field columns of the states ``start .. start + n - 1``, from their keys."""
-        return self.layout.fields(self.store.keys[start : start + n], self.dtype)
+        """Field columns of the states ``start .. start + n - 1``, from their keys; the
+        ones not yet recorded (`record`) are recorded now."""
+        cols = self.layout.fields(self.store.keys[start : start + n], self.dtype)
+        if start + n > self.recorded:
+            self.record_pending(start)
+            self.record(cols[:, self.recorded - start :])
+            self.recorded = start + n
+        return cols
+
+    def record_pending(self, end: int | None = None) -> None:
+        """`record` the stored states from ``recorded`` up to ``end`` (default: all),
+        unpacked from their keys a block at a time."""
+        end = self.store.size if end is None else end
+        # small blocks: this also runs after a search stopped at its memory limit
+        step = max(1, RECORD_CELLS // max(1, self.fnet.n_fields))
+        while self.recorded < end:
+            n = min(step, end - self.recorded)
+            keys = self.store.keys[self.recorded : self.recorded + n]
+            self.record(self.layout.fields(keys, self.dtype))
+            self.recorded += n
 
     def narrow(self, width: int) -> bool:
         """Whether a layer of ``width`` markings is explored by a narrow round: few
@@ -1332,21 +1554,38 @@ class _Explorer:
             current, keys = cols, self.store.keys[base : base + cols.shape[1]]
             budget = min(NARROW_CANDIDATES, self.chunk)  # `chunk` bounds work between checks
             needed: dict[int, int] = {}
+            checked = 0  # candidates when the round's memory was last checked
+            above = cols.shape[1]  # width of the level above ``current``...
+            produced = 0  # ... and the candidates expanding it gave
             while len(spec.keys) < NARROW_LEVELS:
                 width = current.shape[1]
+                if spec.keys and width >= REPEATS_MIN and 2 * width > 3 * above:
+                    spec.drop_repeats()
+                    current, keys = spec.cols[-1], spec.keys[-1]
+                    width = current.shape[1]
                 # too wide to expand in one go, or (lookups make levels cheap) so wide
                 # that unchecked duplicates pile up: the next frontier
                 wide = width * self.tested > CELLS_PER_STEP
                 if spec.keys and (wide or (self.index.looked_up and width > NARROW_WIDTH)):
                     break
+                # a level expected to pass the round's budget by itself: the store
+                # dedupes it more cheaply than another level would (Dekker's last
+                # layers: 15 markings, 508,440 candidates two levels down)
+                if spec.keys and spec.total * above + width * produced > budget * above:
+                    break
+                above = width
                 self.guard(width * self.tested)  # the deadline, between levels too
                 every, cells = self.narrow_edges(current)
                 counts = np.bincount(every[1], minlength=current.shape[1])
                 trans, src = self.fired_edges(every, None, current.shape[1])
                 level = src.size * (self.fnet.n_fields * self.dtype.itemsize + 24)
-                temporaries, grown = self.insert_bytes(spec.total + src.size)
-                if spec.keys and not self.fits(level + temporaries, grown):
-                    break  # store the levels so far instead: their candidates are fewer
+                # with a memory limit, each time the round's candidates double (reading
+                # the process's memory every level cost more than the levels)
+                if spec.keys and self.budget.memory is not None and spec.total >= 2 * checked:
+                    checked = spec.total
+                    temporaries, grown = self.insert_bytes(spec.total + src.size)
+                    if not self.fits(level + temporaries, grown):
+                        break  # store the levels so far instead: their candidates are fewer
                 self.guard(level)
                 new = self.successor_cols(current, src, trans)
                 over = new > self.last_value
@@ -1356,6 +1595,7 @@ class _Explorer:
                     needed = _largest(self.fnet.count_place[field], reached)
                     break
                 self.fired[every[0]] = True
+                produced = src.size
                 keys = keys.take(src, axis=0)
                 keys += self.key_delta.take(trans, axis=0)
                 spec.add(counts, new, keys, src, trans, cells)
@@ -1384,7 +1624,9 @@ class _Explorer:
         self.account(spec.counts[0], base)
         self.via.append(trans.take(first).astype(self.via_type))
         new = new_cols.take(first, axis=1)
+        self.record_pending(start)
         self.record(new)
+        self.recorded = start + first.size
         self.offer(new, start)
         enables = counts.take(first)
         expanded = int(np.count_nonzero(enables >= 0))  # all but the last level's
@@ -1445,7 +1687,7 @@ class _Explorer:
         if budget.expired():
             self.stopped = budget.time_reason(self.store.size, "state")
             raise BudgetExceeded(self.stopped)
-        if budget.memory is not None and extra_bytes + grown_bytes > 0:
+        if budget.memory is not None and extra_bytes + grown_bytes >= GUARD_MIN_BYTES:
             try:
                 budget.check_memory(max(0, extra_bytes - heap_free_bytes()) + grown_bytes)
             except BudgetExceeded:
@@ -1793,6 +2035,10 @@ def _explore(
     except BudgetExceeded:  # a budget ran out; the reason is recorded
         pass
     except MemoryError:  # an allocation failed (memory limit or ceiling): say so, keep the rest
+        explorer.stopped = memory_limit_reason(budget.memory, explorer.store.size)
+    try:
+        explorer.record_pending()  # the bounds of the states stored but not expanded
+    except MemoryError:  # (a few MB at most, after a search that ran out of memory)
         explorer.stopped = memory_limit_reason(budget.memory, explorer.store.size)
     seconds = budget.clock() - explorer.start
     store = explorer.store

@@ -129,17 +129,27 @@ def _components_by_elimination(cn: CompactNet, budget: Budget) -> list[IntArray]
     incidence = cn.delta.T.astype(np.int32)  # (P, T)
     keep = cn.initial <= 1
     rows = np.eye(cn.n_places, dtype=bool)[keep]
+    # Only the columns some row touches; an eliminated column is zero in every row
+    # left (a row is kept where it is zero, or paired to cancel it), so it never
+    # counts again: no list of pending columns to copy out each round.
     residual = incidence[keep]
+    residual = np.ascontiguousarray(residual[:, (residual != 0).any(axis=0)])
     tokens = cn.initial[keep]
-    pending = np.flatnonzero((residual != 0).any(axis=0))
-    while pending.size and rows.shape[0]:
+    while residual.shape[1] and rows.shape[0]:
         if budget.expired():
             break
-        sub = residual[:, pending]
-        cost = (sub > 0).sum(axis=0) * (sub < 0).sum(axis=0) - (sub != 0).sum(axis=0)
-        k = int(np.argmin(cost))
-        t = int(pending[k])
-        pending = np.delete(pending, k)
+        pos = np.count_nonzero(residual > 0, axis=0)
+        neg = np.count_nonzero(residual < 0, axis=0)
+        touched = pos + neg
+        if not touched.any():
+            break
+        if 2 * np.count_nonzero(touched) < touched.size:  # most columns done: drop them
+            live = touched > 0
+            residual = np.ascontiguousarray(residual[:, live])
+            pos, neg, touched = pos[live], neg[live], touched[live]
+        # the cheapest column to eliminate (fewest new rows), the first on ties
+        cost = np.where(touched > 0, pos * neg - touched, np.iinfo(np.int64).max)
+        t = int(np.argmin(cost))
         column = residual[:, t]
         pos, neg = np.flatnonzero(column > 0), np.flatnonzero(column < 0)
         zero = column == 0

@@ -379,6 +379,15 @@ MODES: dict[str, dict[str, float]] = {
     "indexed": {"NARROW_WIDTH": 0, "SLEEP_MIN_DEGREE": 0.0, "KEYED_MIN": 0, "KEYED_SHARE": 0.0},
     # narrow rounds whose levels enable by lookup (`_Explorer.narrow_edges`)
     "indexed, narrow": {"NARROW_WIDTH": 1 << 30, "KEYED_MIN": 0, "KEYED_SHARE": 0.0},
+    # every step's repeated successor keys filtered before the store
+    "wide, repeats filtered": {
+        "NARROW_WIDTH": 0,
+        "SLEEP_MIN_DEGREE": 0.0,
+        "REPEAT_FILTER_MIN": 0,
+        "REPEAT_FILTER_DEGREE": 0.0,
+    },
+    # narrow rounds dropping the repeats of every growing level
+    "narrow, repeats dropped": {"NARROW_WIDTH": 1 << 30, "REPEATS_MIN": 0},
 }
 
 
@@ -415,6 +424,29 @@ def test_every_mode_agrees_with_the_reference(
         return
     assert space.complete, space.stopped_reason
     _agree(space, ref, net)
+
+
+@given(
+    st.lists(st.integers(0, 40), max_size=1000),
+    st.sampled_from([0, 1, 1 << 40, (1 << 64) - 41]),
+)
+def test_the_repeat_filter_keeps_every_first_occurrence_in_order(
+    values: list[int], offset: int
+) -> None:
+    keys = (np.array(values, dtype=np.uint64) + np.uint64(offset)).reshape(-1, 1)
+    explorer = mock.Mock(edges=1, store=mock.Mock(size=0))
+    explorer.repeat_table = np.empty(0, dtype=np.int32)
+    with mock.patch.object(statespace, "REPEAT_FILTER_MIN", 0):
+        kept = statespace._Explorer.unrepeated(explorer, keys)
+    assert kept is not None
+    earliest: dict[int, int] = {}
+    for i, v in enumerate(values):
+        earliest.setdefault(v, i)
+    assert all(np.diff(kept) > 0)
+    assert set(earliest.values()) <= set(kept.tolist())
+    # what it drops repeats a key it keeps (the earliest copy is always kept)
+    for i in set(range(len(values))) - set(kept.tolist()):
+        assert earliest[values[i]] < i
 
 
 def _count_fired(net: Net, mode: str) -> tuple[StateSpace, int]:
