@@ -72,6 +72,12 @@ any_nets = st.one_of(small_nets(max_places=6, max_transitions=7), series_nets())
 @given(any_nets)
 @settings(max_examples=60)
 def test_deadlock_verdict_and_witness_survive_reduction(net: Net) -> None:
+    assert_deadlock_preserved(net)
+
+
+def assert_deadlock_preserved(net: Net) -> None:
+    """The reduced net's deadlock verdict is the full search's, and its witness replays
+    on ``net`` to a dead marking."""
     original = _complete(net)
     answer = decide_deadlock(net, max_states=MAX_STATES)
     assert answer.deadlock == original.has_deadlock

@@ -17,7 +17,11 @@ from analysis.reduce.redundant import (
 from analysis.reduce.work import WorkNet
 from analysis.statespace import explore
 from coral_lang.net import Net, Place, Transition
-from tests.analysis.reduce.test_preservation import MAX_STATES, _complete, _observed
+from tests.analysis.reduce.test_preservation import (
+    _complete,
+    _observed,
+    assert_deadlock_preserved,
+)
 from tests.analysis.strategies import small_nets
 
 
@@ -88,13 +92,7 @@ def shaped_nets(draw: st.DrawFn) -> Net:
 @given(shaped_nets())
 @settings(max_examples=60)
 def test_deadlock_verdict_and_witness_survive_the_rules(net: Net) -> None:
-    original = _complete(net)
-    answer = decide_deadlock(net, max_states=MAX_STATES)
-    assert answer.deadlock == original.has_deadlock
-    if answer.deadlock:
-        assert answer.trace is not None
-        reached = replay(net, answer.trace)
-        assert reached is not None and is_dead(net, reached)
+    assert_deadlock_preserved(net)
 
 
 @st.composite
