@@ -1234,7 +1234,6 @@ class _Explorer:
         cols: npt.NDArray[np.integer],
         base: int,
         edges: Edges,
-        out: list[npt.NDArray[np.integer]],
         keys: npt.NDArray[np.uint64] | None = None,
         want_ids: bool = False,
     ) -> Added:
@@ -1318,7 +1317,6 @@ class _Explorer:
         cols: npt.NDArray[np.integer],
         sleep: npt.NDArray[np.uint64] | None,
         base: int,
-        out: list[npt.NDArray[np.integer]],
     ) -> npt.NDArray[np.integer]:
         """Expand the frontier block ``cols`` (states ``base ...``, sleep sets
         ``sleep``); returns ``cols`` in the current row dtype (it changes when fields
@@ -1329,7 +1327,7 @@ class _Explorer:
         per_state = self.edges / max(1, self.store.size)
         self.guard(n * self.tested + int(n * per_state) * (8 * self.layout.n_words + 32))
         if self.reducer is not None:
-            return self.reduced_step(cols, base, out)
+            return self.reduced_step(cols, base)
         while True:
             if self.index.looked_up:
                 edges = self.edges_of(cols)
@@ -1342,20 +1340,20 @@ class _Explorer:
             keys, needed = self.successor_keys(cols, parents, fired)
             if not needed:
                 break
-            blocks = [cols, *out]
+            blocks = [cols]
             self.widen(needed, blocks)
-            cols, out[:] = blocks[0], blocks[1:]
+            cols = blocks[0]
         if self.index.looked_up:
             self.fired[edges[0]] = True
         self.account(counts, base)
         assert keys is not None
         kept = self.unrepeated(keys)
         if kept is None:
-            added = self.insert(cols, base, fired, out, keys)
+            added = self.insert(cols, base, fired, keys)
             first = added.first
         else:
             offered = fired[0].take(kept), fired[1].take(kept)
-            added = self.insert(cols, base, offered, out, keys.take(kept, axis=0))
+            added = self.insert(cols, base, offered, keys.take(kept, axis=0))
             first = kept.take(added.first)
         if self.sleep_next and self.sleep is not None and first.size:
             self.next_sleep.append(self.sleep.successors(sleep, fired, first, sets))
@@ -1394,7 +1392,6 @@ class _Explorer:
         self,
         cols: npt.NDArray[np.integer],
         base: int,
-        out: list[npt.NDArray[np.integer]],
     ) -> npt.NDArray[np.integer]:
         """`step` with partial-order reduction: fire a stubborn subset of the enabled
         transitions of each marking (needs the whole enabled matrix)."""
@@ -1405,9 +1402,9 @@ class _Explorer:
             needed = self.overflow(cols, enabled, _nonzero(enabled))
             if not needed:
                 break
-            blocks = [cols, *out]
+            blocks = [cols]
             self.widen(needed, blocks)
-            cols, out[:] = blocks[0], blocks[1:]
+            cols = blocks[0]
         any_enabled = enabled.any(axis=0)
         self.fired |= enabled.any(axis=1)
         if not any_enabled.all():
@@ -1416,7 +1413,7 @@ class _Explorer:
         rtrans, rsrc = _nonzero(reduced)
         self.judge_reduction(enabled, rsrc.size)
         self.edges += rsrc.size
-        added = self.insert(cols, base, (rtrans, rsrc), out, want_ids=True)
+        added = self.insert(cols, base, (rtrans, rsrc), want_ids=True)
         if not reducer.needs_proviso or self.stopped:
             return cols
         # Cycle proviso: a marking whose reduced successors include one that was known
@@ -1436,7 +1433,7 @@ class _Explorer:
             extra[:, ~redo] = False
             etrans, esrc = _nonzero(extra)
             self.edges += esrc.size
-            self.insert(cols, base, (etrans, esrc), out)
+            self.insert(cols, base, (etrans, esrc))
         return cols
 
     def judge_reduction(self, enabled: npt.NDArray[np.bool_], fired: int) -> None:
@@ -1492,11 +1489,11 @@ class _Explorer:
                 self.guard(size * self.fnet.n_fields * (self.dtype.itemsize + 8))
                 cols = self.frontier(base + c, size)
                 part = None if sleep_all is None else sleep_all.take(size)
-                self.step(cols, part, base + c, [])
+                self.step(cols, part, base + c)
                 if self.stopped:
                     raise BudgetExceeded(self.stopped)
                 c += size
-                self.check_time(self.store.size - base - c, [])
+                self.check_time(self.store.size - base - c)
             base += width
             sleeps = self.next_sleep if self.sleep_next else None
             if base < self.store.size:
@@ -1639,7 +1636,7 @@ class _Explorer:
             self.stopped = work_limit_reason(self.max_states or 0, "state")
             raise BudgetExceeded(self.stopped)
         frontier = new[:, expanded:]
-        self.check_time(frontier.shape[1], [])
+        self.check_time(frontier.shape[1])
         return frontier, start + expanded
 
     def account(self, counts: npt.NDArray[np.int64], start: int) -> None:
@@ -1665,13 +1662,12 @@ class _Explorer:
             size = min(size, max(256, POR_SAMPLE - self.choice_markings))
         return size
 
-    def check_time(self, left: int, out: list[npt.NDArray[np.integer]]) -> None:
+    def check_time(self, left: int) -> None:
         """Report progress, and stop (with the budget's reason) past its deadline."""
         if self.progress is not None:
             now = self.budget.clock() - self.start
-            queued = left + sum(block.shape[1] for block in out)
             self.progress(
-                ProgressInfo(self.store.size, self.edges, queued, len(self.layer_starts), now)
+                ProgressInfo(self.store.size, self.edges, left, len(self.layer_starts), now)
             )
         self.guard()
 
