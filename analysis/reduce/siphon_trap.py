@@ -16,10 +16,8 @@ their search.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-
 from analysis.budget import Budget
-from analysis.siphons import minimal_siphons
+from analysis.siphons import siphon_trap_check
 from coral_lang.net import Net
 
 SIPHON_BRANCHES = 100
@@ -34,36 +32,14 @@ and has 1.2e9 edges)."""
 
 def siphons_prove_deadlock_free(net: Net, budget: Budget | None = None) -> bool:
     """True when ``net`` is ordinary and every minimal siphon (all of them found within
-    the caps) contains an initially marked trap: then no reachable marking is dead."""
+    the caps) contains an initially marked trap: then no reachable marking is dead
+    (`analysis.siphons.siphon_trap_check`, with small caps)."""
     if not net.transitions or any(
         w != 1 for t in net.transitions for _, w in (*t.inputs, *t.outputs)
     ):
-        return False
+        return False  # (checked first: a weighted net is not worth the enumeration)
     scale = 10 if len(net.transitions) >= WIDE else 1
     left = None if budget is None else budget.remaining()
     seconds = scale * SIPHON_SECONDS if left is None else min(scale * SIPHON_SECONDS, left / 4)
-    found = minimal_siphons(net, scale * SIPHON_BRANCHES, Budget(seconds))
-    if not found.complete:
-        return False
-    consumers: dict[str, list[frozenset[str]]] = {p.name: [] for p in net.places}
-    for t in net.transitions:
-        outputs = frozenset(p for p, _ in t.outputs)
-        for p, _ in t.inputs:
-            consumers[p].append(outputs)
-    marked = {p.name for p in net.places if p.initial}
-    return all(_max_trap(siphon, consumers) & marked for siphon in found.siphons)
-
-
-def _max_trap(places: Iterable[str], consumers: dict[str, list[frozenset[str]]]) -> set[str]:
-    """The largest trap inside ``places``: drop a place while some transition takes from
-    it without putting back into what is left (as `analysis.siphons.maximal_trap`, with
-    the arcs indexed once for all siphons rather than once per siphon)."""
-    trap = set(places)
-    changed = True
-    while changed:
-        changed = False
-        for p in list(trap):
-            if any(not (outputs & trap) for outputs in consumers[p]):
-                trap.discard(p)
-                changed = True
-    return trap
+    check = siphon_trap_check(net, scale * SIPHON_BRANCHES, Budget(seconds))
+    return check.proves_deadlock_free
