@@ -37,7 +37,7 @@ def groups_by_top(transitions: Sequence[_Transition]) -> list[list[_Transition]]
 
 
 class Saturation:
-    """One saturation run. `step(t, frontier, reached)` is the caller's hook after each
+    """One saturation run. `step(t, frontier)` is the caller's hook before each
     image (overflow detection, budgets): it returns a reason to stop, or None."""
 
     def __init__(
