@@ -83,6 +83,7 @@ from analysis.encoding import (
     KeyStore,
     KeyView,
     Layout,
+    invariant_place_bounds,
     one_hot_components,
     row_dtype,
 )
@@ -869,7 +870,8 @@ class _Explorer:
         small = max_states is not None and max_states < np.iinfo(np.int32).max // 2
         self.index_type = np.int32 if small else np.int64
         self.via_type = _via_type(cn.n_transitions)
-        layout = Layout.initial_guess(cn, one_hot_components(cn, budget))
+        bounds = invariant_place_bounds(cn, budget)
+        layout = Layout.initial_guess(cn, one_hot_components(cn, budget), bounds)
         self.fnet = fnet = FieldNet(cn, layout)
         self.index = _EnablingIndex(fnet, layout, cn.n_transitions)
         # transitions tested in every marking of a narrow level (the others by lookup)
@@ -1148,7 +1150,7 @@ class _Explorer:
             self.widenings[p] += 1
         grown = np.flatnonzero((self.widenings > 2) & half_full)
         growing = grown[np.argsort(-self.widenings[grown], kind="stable")].tolist()
-        layout = self.layout.widened(needed, growing)
+        layout = self.layout.widened(needed, growing, self.field_max)
         if int(layout.count_bits.max(initial=0)) > MAX_FIELD_BITS:
             p = max(needed, key=lambda q: needed[q])
             name = self.cn.net.places[p].name

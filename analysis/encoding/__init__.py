@@ -25,6 +25,7 @@ One module per piece; this package re-exports their public names, so
   frontiers.
 """
 
+from analysis.encoding.bounds import UNBOUNDED, invariant_place_bounds
 from analysis.encoding.compact import (
     FIELD_LOOP,
     MAX_FIELD_BITS,
@@ -80,6 +81,7 @@ __all__ = [
     "SEARCH_PLACES",
     "SEARCH_ROWS",
     "SEARCH_SECONDS",
+    "UNBOUNDED",
     "WIDE_KEYS",
     "Added",
     "Arcs",
@@ -97,6 +99,7 @@ __all__ = [
     "PackedRows",
     "PresetGroup",
     "first_occurrences",
+    "invariant_place_bounds",
     "one_hot_components",
     "row_dtype",
     "word_multipliers",

@@ -35,6 +35,10 @@ def _count_bits(value: int) -> int:
     return max(1, _bits_for(value))
 
 
+SMALL_FIELD_BITS = 4
+"""Widest a count field starts at when a proven bound caps it (below, the cap itself)."""
+
+
 @dataclass(frozen=True)
 class Layout:
     """Where each place's token count sits inside the packed key of a marking.
@@ -55,6 +59,9 @@ class Layout:
         n_places: places of the net.
         first: per field, the value of its first place (0 for counts and components
             that always hold a token, 1 for the others); empty means all 0.
+        caps: per field, the most bits its values can ever need (a place bound proven
+            by an invariant, see `analysis.encoding.bounds`): no widening goes past it.
+            Empty means `MAX_FIELD_BITS` for all.
     """
 
     bits: tuple[int, ...]
@@ -65,6 +72,7 @@ class Layout:
     n_words: int
     n_places: int
     first: tuple[int, ...] = ()
+    caps: tuple[int, ...] = ()
 
     @classmethod
     def build(
@@ -74,6 +82,7 @@ class Layout:
         onehot: Sequence[bool],
         n_places: int,
         first: Sequence[int] = (),
+        caps: Sequence[int] = (),
     ) -> Layout:
         """Pack the fields first-fit, widest first (fewest words), never past bit 62."""
         word = np.zeros(len(bits), dtype=np.int64)
@@ -94,6 +103,7 @@ class Layout:
             max(1, len(used)),
             n_places,
             tuple(int(v) for v in first) or (0,) * len(bits),
+            tuple(int(c) for c in caps) or (MAX_FIELD_BITS,) * len(bits),
         )
 
     @classmethod
@@ -102,25 +112,45 @@ class Layout:
         return cls.build(bits, [(p,) for p in range(len(bits))], [False] * len(bits), len(bits))
 
     @classmethod
-    def initial_guess(cls, cn: CompactNet, components: Sequence[Component] | None = None) -> Layout:
+    def initial_guess(
+        cls,
+        cn: CompactNet,
+        components: Sequence[Component] | None = None,
+        bounds: IntArray | None = None,
+    ) -> Layout:
         """One field per component, and count fields wide enough for the initial
-        marking and one firing's increase for the other places."""
+        marking and one firing's increase for the other places, capped by their proven
+        ``bounds`` (per place, negative where unknown). A bounded field starts at its
+        cap when that is at most `SMALL_FIELD_BITS` (no widening ever re-packs for it);
+        a wider cap is reached by widening only if the counts get there."""
         components = list(components or [])
         covered = np.zeros(cn.n_places, dtype=bool)
         for c in components:
             covered[c.places] = True
         bits = [_bits_for(c.values - 1) for c in components]
+        caps = list(bits)
         members: list[Sequence[int]] = [c.places.tolist() for c in components]
         onehot = [True] * len(components)
         first = [0 if c.exact else 1 for c in components]
         for p in np.flatnonzero(~covered).tolist():
-            bits.append(_count_bits(max(int(cn.initial[p]), int(cn.max_increase[p]))))
+            guess = _count_bits(max(int(cn.initial[p]), int(cn.max_increase[p])))
+            cap = MAX_FIELD_BITS
+            if bounds is not None and int(bounds[p]) >= 0:
+                cap = min(cap, _count_bits(int(bounds[p])))
+                guess = cap if cap <= SMALL_FIELD_BITS else min(guess, cap)
+            bits.append(guess)
+            caps.append(cap)
             members.append((p,))
             onehot.append(False)
             first.append(0)
-        return cls.build(bits, members, onehot, cn.n_places, first)
+        return cls.build(bits, members, onehot, cn.n_places, first, caps)
 
-    def widened(self, needed: dict[int, int], growing: Sequence[int] = ()) -> Layout:
+    def widened(
+        self,
+        needed: dict[int, int],
+        growing: Sequence[int] = (),
+        reached: IntArray | None = None,
+    ) -> Layout:
         """A layout where place ``p`` holds at least ``needed[p]`` (the largest count
         about to be reached; never a one-hot place).
 
@@ -130,24 +160,52 @@ class Layout:
         close to their limit, widened three times already), each at most doubling. A
         place that keeps growing is thus re-packed about ``log log bound`` times, and
         a bounded net keeps the fewest words its bounds allow.
+
+        Spare bits given earlier may be what a new word would be for: when ``reached``
+        (per field, the largest value stored so far) is given and the widths that
+        values need (one bit of headroom below the cap) take fewer words, those are
+        used instead, narrower fields included (DoubleExponent-PT-003: 2 words where
+        the generous widths took 3). No width is ever past its `caps` entry.
         """
-        bits = list(self.bits)
-        for p, value in needed.items():
-            f = int(self.field_of[p])
-            bits[f] = max(bits[f] + 1, _count_bits(value) + 1)
+        bits = self._needed_bits(list(self.bits), needed)
         words = self._rebuilt(bits).n_words
+        if reached is not None and words > self.n_words:
+            tight = self._needed_bits(self._tight_bits(reached), needed)
+            if self._rebuilt(tight).n_words < words:
+                bits, words = tight, self._rebuilt(tight).n_words
         for p in growing:
             f = int(self.field_of[p])
             trial = list(bits)
-            trial[f] = min(2 * bits[f], MAX_FIELD_BITS)
+            trial[f] = min(2 * bits[f], self.caps[f])
             fits = trial[f] > bits[f] and sum(trial) <= 63 * words
             if fits and self._rebuilt(trial).n_words == words:
                 bits = trial
         return self._rebuilt(bits)
 
+    def _needed_bits(self, bits: list[int], needed: dict[int, int]) -> list[int]:
+        """``bits`` with the fields of ``needed`` places widened (one bit of headroom,
+        within the cap; never narrower)."""
+        for p, value in needed.items():
+            f = int(self.field_of[p])
+            wider = max(bits[f] + 1, _count_bits(value) + 1)
+            if _count_bits(value) <= self.caps[f]:  # always, the cap being proven
+                wider = min(wider, self.caps[f])
+            bits[f] = max(bits[f], wider)
+        return bits
+
+    def _tight_bits(self, reached: IntArray) -> list[int]:
+        """Per field, the bits its largest value so far needs plus one of headroom
+        (none at the cap); one-hot fields as they are."""
+        out = list(self.bits)
+        for f, onehot in enumerate(self.onehot):
+            if not onehot:
+                need = _count_bits(int(reached[f]))
+                out[f] = min(self.caps[f], need + 1) if need < self.caps[f] else need
+        return out
+
     def _rebuilt(self, bits: Sequence[int]) -> Layout:
         """This layout with other field widths."""
-        return Layout.build(bits, self.members, self.onehot, self.n_places, self.first)
+        return Layout.build(bits, self.members, self.onehot, self.n_places, self.first, self.caps)
 
     def repack(self, keys: KeyArray, other: Layout, out: KeyArray | None = None) -> KeyArray:
         """``keys`` (packed with this layout) packed with ``other``, which has the same
