@@ -101,6 +101,11 @@ DEFAULT_CHUNK = 1 << 15
 EDGES_PER_STEP = 1 << 19
 """Most edges one vectorised step handles (about 40 MB of temporaries at most)."""
 
+STEP_BYTES = 64 << 20
+"""Most bytes of successor keys (and, in a narrow round, columns) one vectorised step
+builds: `EDGES_PER_STEP` assumes keys of a word or two, while a net of 10,000 places of
+2-bit counts has keys of 320 words, where that many edges would take gigabytes."""
+
 CELLS_PER_STEP = 1 << 23
 """Most (transition, marking) cells of one step's enabled matrix (8 MB of booleans)."""
 
@@ -1327,7 +1332,7 @@ class _Explorer:
         fired: Edges | None = None
         n = cols.shape[1]
         per_state = self.edges / max(1, self.store.size)
-        self.guard(n * self.tested + int(n * per_state) * (8 * self.layout.n_words + 32))
+        self.guard(n * self.tested + int(n * per_state) * self.edge_bytes)
         if self.reducer is not None:
             return self.reduced_step(cols, base)
         while True:
@@ -1338,6 +1343,12 @@ class _Explorer:
                 sets = None
             else:
                 counts, fired, sets = self.matrix_edges(cols, sleep)
+            if n > 1 and fired[0].size * self.edge_bytes > STEP_BYTES:
+                fired = None  # (the halves list their own edges: free these first)
+                del counts, sets
+                if self.index.looked_up:
+                    del edges
+                return self.split_step(cols, sleep, base)
             parents = self.store.keys[base : base + cols.shape[1]]
             keys, needed = self.successor_keys(cols, parents, fired)
             if not needed:
@@ -1360,6 +1371,24 @@ class _Explorer:
         if self.sleep_next and self.sleep is not None and first.size:
             self.next_sleep.append(self.sleep.successors(sleep, fired, first, sets))
         return cols
+
+    def split_step(
+        self,
+        cols: npt.NDArray[np.integer],
+        sleep: npt.NDArray[np.uint64] | None,
+        base: int,
+    ) -> npt.NDArray[np.integer]:
+        """`step` on each half of a block whose edges would pass `STEP_BYTES`: the
+        block size follows the edges per state seen so far, and a layer may enable far
+        more (the first wide layer of a net with thousands of transitions). The halves
+        go in order, so the new states and their sleep sets come in the same order."""
+        half = cols.shape[1] // 2
+        self.step(cols[:, :half], None if sleep is None else sleep[:half], base)
+        if self.stopped:
+            return cols.astype(self.dtype, copy=False)
+        rest = cols[:, half:].astype(self.dtype, copy=False)  # (the first half may widen)
+        self.step(rest, None if sleep is None else sleep[half:], base + half)
+        return cols.astype(self.dtype, copy=False)
 
     def unrepeated(self, keys: npt.NDArray[np.uint64]) -> npt.NDArray[np.int64] | None:
         """Positions of ``keys`` to offer to the store, ascending: all but most repeats
@@ -1474,9 +1503,11 @@ class _Explorer:
         while base < self.store.size:
             width = self.store.size - base
             if self.narrow(width):
-                _, base = self.narrow_round(self.frontier(base, width), base)
-                sleeps = None
-                continue
+                done = self.narrow_round(self.frontier(base, width), base)
+                if done is not None:
+                    base = done[1]
+                    sleeps = None
+                    continue
             self.next_sleep = []
             self.sleep_next = self.sleep is not None and self.edges >= SLEEP_MIN_DEGREE * base
             # Each block takes its sleep sets off the front of the layer's pieces, which
@@ -1527,7 +1558,9 @@ class _Explorer:
         """Whether a layer of ``width`` markings is explored by a narrow round: few
         markings, and an enabled matrix small enough to compute at once."""
         few = width <= NARROW_WIDTH and width * self.tested <= CELLS_PER_STEP
-        return few and self.reducer is None
+        per_state = max(1.0, self.edges / max(1, self.store.size))
+        small = width * per_state * self.candidate_bytes <= STEP_BYTES
+        return few and small and self.reducer is None
 
     def narrow_edges(self, cols: npt.NDArray[np.integer]) -> tuple[Edges, int]:
         """The enabled (transition, column) pairs of a narrow level and the cells it
@@ -1541,17 +1574,20 @@ class _Explorer:
         edges = self.edges_of(cols)
         return edges, cols.shape[1] * self.index.dense.size + edges[0].size
 
-    def speculate(self, cols: npt.NDArray[np.integer], base: int) -> _Round:
+    def speculate(self, cols: npt.NDArray[np.integer], base: int) -> _Round | None:
         """Expand the narrow layer ``cols`` (states ``base ...``) and then its successors,
         level after level, without asking the store whether they are new: as long as
         the candidates stay few, a level costs a couple of dozen small numpy calls and
         no hashing. Level ``j`` holds every successor of level ``j - 1`` (known or not),
         so it contains the whole BFS layer ``j`` below ``cols``, and a key's first level
-        is its depth. The last level is not expanded."""
+        is its depth. The last level is not expanded. None when the first level alone
+        would pass `STEP_BYTES` (`narrow` guessed its width from the edges per state so
+        far): the layer is then expanded by blocks."""
         while True:
             spec = _Round()
             current, keys = cols, self.store.keys[base : base + cols.shape[1]]
-            budget = min(NARROW_CANDIDATES, self.chunk)  # `chunk` bounds work between checks
+            # `chunk` bounds work between checks, `STEP_BYTES` the round's memory
+            budget = min(NARROW_CANDIDATES, self.chunk, STEP_BYTES // self.candidate_bytes)
             needed: dict[int, int] = {}
             checked = 0  # candidates when the round's memory was last checked
             above = cols.shape[1]  # width of the level above ``current``...
@@ -1577,6 +1613,8 @@ class _Explorer:
                 every, cells = self.narrow_edges(current)
                 counts = np.bincount(every[1], minlength=current.shape[1])
                 trans, src = self.fired_edges(every, None, current.shape[1])
+                if not spec.keys and src.size * self.candidate_bytes > STEP_BYTES:
+                    return None  # a first level this wide is a layer for `step`
                 level = src.size * (self.fnet.n_fields * self.dtype.itemsize + 24)
                 # with a memory limit, each time the round's candidates double (reading
                 # the process's memory every level cost more than the levels)
@@ -1609,12 +1647,15 @@ class _Explorer:
 
     def narrow_round(
         self, cols: npt.NDArray[np.integer], base: int
-    ) -> tuple[npt.NDArray[np.integer], int]:
+    ) -> tuple[npt.NDArray[np.integer], int] | None:
         """Explore several BFS layers below the narrow layer ``cols`` (states
         ``base ...``) with one insertion into the store (see `speculate`); returns the
-        next frontier and its first state number."""
+        next frontier and its first state number, or None when the layer is to be
+        expanded by blocks instead (nothing was stored)."""
         self.sleep_next = False
         spec = self.speculate(cols, base)
+        if spec is None:
+            return None
         self.guard_insert(spec.total)
         keys, new_cols, _, trans, counts = spec.joined()
         limit = None if self.max_states is None else self.max_states - self.store.size
@@ -1655,7 +1696,7 @@ class _Explorer:
         handles at most `EDGES_PER_STEP` edges and `CELLS_PER_STEP` cells of the
         enabled matrix (bounded temporaries, warmer caches)."""
         per_state = self.edges / max(1, self.store.size)
-        by_edges = int(EDGES_PER_STEP / max(per_state, 1.0))
+        by_edges = int(min(EDGES_PER_STEP, STEP_BYTES // self.edge_bytes) / max(per_state, 1.0))
         tested = self.tested if self.reducer is None else self.cn.n_transitions
         by_matrix = CELLS_PER_STEP // max(1, tested)  # lookups build no (T, n) matrix
         size = max(min(256, self.chunk), min(self.chunk, by_edges, by_matrix))
@@ -1663,6 +1704,17 @@ class _Explorer:
             # Small steps until the reduction is judged, so it is judged on the sample.
             size = min(size, max(256, POR_SAMPLE - self.choice_markings))
         return size
+
+    @property
+    def edge_bytes(self) -> int:
+        """Bytes of temporaries per edge of a step: a few copies of its successor's key
+        (parent's, delta, sum, carries) and its numbers (source, transition, hash, slot)."""
+        return 32 * self.layout.n_words + 64
+
+    @property
+    def candidate_bytes(self) -> int:
+        """Bytes a narrow round keeps per candidate: its columns, key and edge."""
+        return self.fnet.n_fields * self.dtype.itemsize + 8 * self.layout.n_words + 24
 
     def check_time(self, left: int) -> None:
         """Report progress, and stop (with the budget's reason) past its deadline."""
