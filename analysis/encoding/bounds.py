@@ -23,6 +23,8 @@ BOUNDS_SECONDS = 0.25
 BOUNDS_ROWS = 20_000
 """Most working rows of the invariant search (Fourier-Motzkin elimination)."""
 
+_CACHE = "_invariant_place_bounds"
+
 UNBOUNDED = -1
 """`invariant_place_bounds` of a place no invariant found bounds."""
 
@@ -31,6 +33,9 @@ def invariant_place_bounds(cn: CompactNet, budget: Budget | None = None) -> IntA
     """Per place, the smallest bound the P-invariants found prove (`UNBOUNDED` where
     none does). Each listed invariant is genuine even when the search stopped at its
     limits, so the bounds are sound either way; they are only fewer."""
+    known = cn.__dict__.get(_CACHE)  # (one search per net: queries explore it often)
+    if known is not None:
+        return np.array(known, dtype=np.int64)
     out = np.full(cn.n_places, UNBOUNDED, dtype=np.int64)
     if not cn.n_places:
         return out
@@ -45,4 +50,5 @@ def invariant_place_bounds(cn: CompactNet, budget: Budget | None = None) -> IntA
                 best[p] = min(total // weight, best.get(p, total // weight))
     for p, bound in best.items():
         out[p] = min(bound, np.iinfo(np.int64).max)
+    cn.__dict__[_CACHE] = out.copy()  # as `functools.cached_property` does
     return out

@@ -5,10 +5,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analysis.encoding import UNBOUNDED, CompactNet, Layout, invariant_place_bounds
+from analysis.encoding import UNBOUNDED, CompactNet, Layout, bounds, invariant_place_bounds
 from analysis.statespace import explore
 from coral_lang.net import Net
 from tests.analysis.nets import make_net
@@ -91,3 +92,13 @@ def test_tight_widths_save_the_word_generous_ones_add() -> None:
     tight = layout.widened({0: 1000}, reached=small)
     assert tight.n_words == 2
     assert tight.bits[1:] == (3,) * 29
+
+
+def test_the_search_runs_once_per_net(monkeypatch: pytest.MonkeyPatch) -> None:
+    cn = CompactNet.from_net(_ring(3, 2))
+    first = invariant_place_bounds(cn)
+    monkeypatch.setattr(bounds, "p_invariants", None)  # a second search would fail
+    again = invariant_place_bounds(cn)
+    assert again.tolist() == first.tolist() == [2, 2, 2]
+    again[0] = 99  # callers get their own copy
+    assert invariant_place_bounds(cn).tolist() == [2, 2, 2]
