@@ -217,15 +217,19 @@ class Finding:
         return {"message": self.message, "location": self.span.to_dict() if self.span else None}
 
 
-def _element_span(net: Net | None, name: str) -> Span | None:
+def element_span(net: Net | None, name: str) -> Span | None:
+    """Where the place or transition ``name`` of ``net`` is written, if known."""
     if net is None:
         return None
-    if name in net.place_names:
-        return net.place(name).span
-    try:
-        return net.transition(name).span
-    except KeyError:
-        return None
+    # by the net's name indexes: `Net.place_names` builds a tuple of all names, and a
+    # report on an incomplete search of a wide net locates thousands of elements
+    # (9,000 of 10,000: 28 s)
+    for element in (net.place, net.transition):
+        try:
+            return element(name).span
+        except KeyError:
+            continue
+    return None
 
 
 def _last_span(evidence: Evidence) -> Span | None:
@@ -254,13 +258,13 @@ def located_findings(prop: PropertyResult, net: Net | None) -> list[Finding]:
     found: list[Finding] = []
     if key == "dead_transitions":
         text = "can never fire" if sure else "was not seen firing (search incomplete)"
-        found = [Finding(f"transition '{n}' {text}", _element_span(net, n)) for n in prop.items]
+        found = [Finding(f"transition '{n}' {text}", element_span(net, n)) for n in prop.items]
     elif key == "never_marked_places":
         text = "never holds a token" if sure else "was not seen marked (search incomplete)"
-        found = [Finding(f"place '{n}' {text}", _element_span(net, n)) for n in prop.items]
+        found = [Finding(f"place '{n}' {text}", element_span(net, n)) for n in prop.items]
     elif key == "bounded":
         text = "is unbounded" if sure else "may be unbounded"
-        found = [Finding(f"place '{n}' {text}", _element_span(net, n)) for n in prop.items]
+        found = [Finding(f"place '{n}' {text}", element_span(net, n)) for n in prop.items]
     elif key == "resource_conflicts" and prop.items:
         for name in prop.items:
             others = ", ".join(f"'{o}'" for o in prop.items if o != name) or "itself"
@@ -268,7 +272,7 @@ def located_findings(prop: PropertyResult, net: Net | None) -> list[Finding]:
                 Finding(
                     f"command of transition '{name}' in flight together with {others}, "
                     "on one vehicle resource",
-                    _element_span(net, name),
+                    element_span(net, name),
                 )
             )
     elif key == "deadlock":

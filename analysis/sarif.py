@@ -28,7 +28,7 @@ from urllib.parse import quote
 
 from analysis.lint import RULES
 from analysis.outcome import FileOutcome, worst_exit_code
-from analysis.report import Evidence, PropertyResult, Step, Verdict
+from analysis.report import Evidence, PropertyResult, Step, Verdict, element_span
 from coral_lang.codes import CODES
 from coral_lang.diagnostics import Diagnostic, Severity, Span
 from coral_lang.net import Net, format_tokens
@@ -185,19 +185,7 @@ def _diagnostic_result(d: Diagnostic, outcome: FileOutcome, locator: _Locator) -
 
 
 def _spans_of(names: Iterable[str], net: Net) -> list[Span]:
-    spans = []
-    for name in names:
-        span = None
-        if name in net.place_names:
-            span = net.place(name).span
-        else:
-            try:
-                span = net.transition(name).span
-            except KeyError:
-                continue
-        if span is not None:
-            spans.append(span)
-    return spans
+    return [span for name in names if (span := element_span(net, name)) is not None]
 
 
 def _where(prop: PropertyResult, net: Net | None) -> list[Span]:

@@ -329,9 +329,10 @@ class Net:
         """Position of transition ``name`` in `transitions`."""
         return self._transition_index[name]
 
-    @property
+    @functools.cached_property
     def place_names(self) -> tuple[str, ...]:
-        """Place names in marking order."""
+        """Place names in marking order (built once: callers test membership in it, and
+        a report on a wide net asks thousands of times)."""
         return tuple(p.name for p in self.places)
 
     # -- markings -----------------------------------------------------------------------

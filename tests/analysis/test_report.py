@@ -18,6 +18,7 @@ from analysis.report import (
     StateSpaceFigures,
     Step,
     Verdict,
+    element_span,
     located_findings,
 )
 from analysis.verify import VerifyOptions, verify
@@ -176,3 +177,12 @@ def test_a_property_that_is_not_required_says_so_where_it_is_located() -> None:
     assert located_findings(prop, None) == [
         Finding("violated, not required: every run ends", where)
     ]
+
+
+def test_element_span_finds_places_and_transitions_by_name() -> None:
+    net = compile_file(EXAMPLES / "pool_mission" / "pool_mission.coral").net
+    place, transition = net.places[0], net.transitions[0]
+    assert element_span(net, place.name) == place.span is not None
+    assert element_span(net, transition.name) == transition.span is not None
+    assert element_span(net, "no such element") is None
+    assert element_span(None, place.name) is None
