@@ -199,12 +199,14 @@ def final_states(space: StateSpace) -> BoolArray:
             block = space.layout.unpack(space.keys[start:stop])
             out[start:stop] = final_rows(block, finals)
         return out
-    keys = space.keys[: space.states]
-    for key, final in zip(
-        space.layout.pack(finals.patterns), finals.patterns.tolist(), strict=True
-    ):
-        for state in np.flatnonzero((keys == key).all(axis=1)).tolist():
-            out[state] |= space.marking(state) == tuple(final)
+    packed = space.layout.pack(finals.patterns)
+    patterns = [tuple(final) for final in finals.patterns.tolist()]
+    # a block of keys at a time: the store keeps them packed in fewer bytes than words
+    for start in range(0, space.states, DEAD_CHUNK):
+        keys = space.keys[start : min(start + DEAD_CHUNK, space.states)]
+        for key, final in zip(packed, patterns, strict=True):
+            for row in np.flatnonzero((keys == key).all(axis=1)).tolist():
+                out[start + row] |= space.marking(start + row) == final
     return out
 
 

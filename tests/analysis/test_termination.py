@@ -20,6 +20,7 @@ from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
 import analysis.stategraph as stategraph
+import analysis.termination as termination
 from analysis.certificate import (
     CertificateError,
     check_certificate,
@@ -439,6 +440,9 @@ def test_final_states_compare_packed_keys_but_confirm_them() -> None:
     expected = [net.is_final(space.marking(i)) for i in range(space.states)]
     assert final_states(space).tolist() == expected
     assert sum(expected) == 4
+    with pytest.MonkeyPatch.context() as patch:  # blocks of 7 keys: the same answers
+        patch.setattr(termination, "DEAD_CHUNK", 7)
+        assert final_states(space).tolist() == expected
     stuck = non_final_dead_states(space)
     assert stuck.size == 0
 
