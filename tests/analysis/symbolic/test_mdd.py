@@ -1,0 +1,111 @@
+"""Node-level saturation (`analysis.symbolic.mdd`): units found from P-invariants,
+exact counts against a breadth-first search on small nets with and without units, the
+cap that reports a possibly unbounded place, and the fallback to the set-level
+schedule giving the same answers."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import pytest
+from hypothesis import given, settings
+
+import analysis.symbolic.explore as explore
+from analysis.symbolic import SymbolicLimits, explore_symbolic
+from analysis.symbolic.encoding import invariant_facts, level_order, place_order
+from analysis.symbolic.mdd import MddSaturation, Unbounded
+from coral_lang.net import Net
+from tests.analysis.nets import make_net
+from tests.analysis.symbolic.test_saturate import small_nets
+
+
+def _reachable(net: Net) -> set[tuple[int, ...]]:
+    start = net.initial_marking()
+    seen = {start}
+    queue = deque([start])
+    while queue:
+        marking = queue.popleft()
+        for t in net.transitions:
+            if net.enabled(marking, t):
+                after = net.fire(marking, t)
+                if after not in seen:
+                    seen.add(after)
+                    queue.append(after)
+    return seen
+
+
+def _never(nodes: int) -> str | None:
+    return None
+
+
+def _mutex(n: int) -> Net:
+    """n processes idle -> waiting -> critical -> idle around one lock, each process a
+    unit of three places, the lock a unit with the critical places."""
+    places: dict[str, int] = {"lock": 1}
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        places |= {f"idle{i}": 1, f"wait{i}": 0, f"crit{i}": 0}
+        transitions[f"ask{i}"] = ({f"idle{i}": 1}, {f"wait{i}": 1})
+        transitions[f"enter{i}"] = ({f"wait{i}": 1, "lock": 1}, {f"crit{i}": 1})
+        transitions[f"leave{i}"] = ({f"crit{i}": 1}, {f"idle{i}": 1, "lock": 1})
+    return make_net("mutex", places, transitions)
+
+
+def test_units_are_the_one_token_invariants() -> None:
+    net = _mutex(3)
+    names = [p.name for p in net.places]
+    _, units = invariant_facts(net, 5.0)
+    found = {frozenset(names[p] for p in unit) for unit in units}
+    # the largest first: the lock with every critical section, then what is left
+    assert frozenset({"lock", "crit0", "crit1", "crit2"}) in found
+    taken = [p for unit in units for p in unit]
+    assert len(taken) == len(set(taken))  # disjoint
+
+
+@pytest.mark.parametrize("n", [1, 2, 4])
+def test_units_count_exactly(n: int) -> None:
+    net = _mutex(n)
+    bounds, units = invariant_facts(net, 5.0)
+    levels = level_order(net, units, place_order(net))
+    assert sorted(p for level in levels for p in level) == list(range(len(net.places)))
+    assert any(len(level) > 1 for level in levels)
+    run = MddSaturation(net, levels, [b or 7 for b in bounds], _never)
+    root = run.run(list(net.initial_marking()))
+    reachable = _reachable(net)
+    assert run.count(root) == len(reachable)
+    assert run.largest(root) == [max(m[p] for m in reachable) for p in range(len(net.places))]
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(small_nets())
+def test_counters_count_exactly(net: Net) -> None:
+    """One level per place (no units): the reachable markings of small random nets."""
+    levels = [[p] for p in range(len(net.places))]
+    run = MddSaturation(net, levels, [63] * len(net.places), _never)
+    root = run.run(list(net.initial_marking()))
+    reachable = _reachable(net)
+    assert run.count(root) == len(reachable)
+    assert run.largest(root) == [max(m[p] for m in reachable) for p in range(len(net.places))]
+
+
+def test_a_place_past_its_cap_is_reported() -> None:
+    net = make_net("pump", {"a": 1, "b": 0}, {"t": ({"a": 1}, {"a": 1, "b": 1})})
+    run = MddSaturation(net, [[0], [1]], [1, 5], _never)
+    with pytest.raises(Unbounded) as caught:
+        run.run([1, 0])
+    assert caught.value.place == 1
+    result = explore_symbolic(net, SymbolicLimits(max_bits=4))
+    assert not result.complete and result.reason is not None and "b" in result.reason
+
+
+def test_giving_up_falls_back_to_sets(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With no node images allowed the set-level schedule answers, the same answers."""
+    net = _mutex(3)
+    nodes = explore_symbolic(net)
+    monkeypatch.setattr(explore, "MDD_MAX_CALLS", -1)
+    monkeypatch.setattr("analysis.symbolic.mdd.CHECK_EVERY", 1)
+    sets = explore_symbolic(net)
+    assert nodes.complete and sets.complete
+    assert nodes.states == sets.states == len(_reachable(net))
+    assert nodes.iterations != sets.iterations  # a different schedule ran
+    assert (nodes.deadlock, nodes.max_tokens_place) == (sets.deadlock, sets.max_tokens_place)
