@@ -118,6 +118,7 @@ class MddSaturation:
         index = {p.name: i for i, p in enumerate(net.places)}
         self.caps = [caps[u[0]] if len(u) == 1 else len(u) - 1 for u in self.units]
         self.by_top: list[list[_Event]] = [[] for _ in range(self.levels)]
+        self.always_enabled = False
         level_of = {p: k for k, u in enumerate(self.units) for p in u}
         for number, tr in enumerate(net.transitions):
             pre: dict[int, int] = {}
@@ -128,8 +129,11 @@ class MddSaturation:
                 post[index[name]] = post.get(index[name], 0) + w
             touched = sorted({level_of[p] for p in (*pre, *post)})
             steps = _steps(pre, post, [self.units[k] for k in touched])
+            if steps is None:
+                continue  # never fires: never enabled, never a step
             if not steps:
-                continue  # never fires, or changes nothing and is enabled everywhere
+                self.always_enabled = True  # no place constrains it: no dead marking
+                continue
             steps = {touched[k]: step for k, step in steps.items()}
             event = _Event(number, steps, min(steps), max(steps))
             self.by_top[event.top].append(event)
@@ -139,7 +143,23 @@ class MddSaturation:
         self.unique: dict[tuple[int, tuple[tuple[int, int], ...]], int] = {}
         self.union_cache: dict[tuple[int, int], int] = {}
         self.fire_cache: dict[tuple[int, int], int] = {}
+        self.saturated: dict[int, int] = {}
         self.calls = 0
+        # per level, the events whose top it is: by the exact value they need (a
+        # unit's place), and (need, (event, delta)) for counters
+        self.exact: list[dict[int, list[tuple[_Event, int]]]] = []
+        self.counting: list[list[tuple[int, tuple[_Event, int]]]] = []
+        for level, events in enumerate(self.by_top):
+            exact: dict[int, list[tuple[_Event, int]]] = {}
+            counting: list[tuple[int, tuple[_Event, int]]] = []
+            for event in events:
+                need, delta, is_exact = event.steps[level]
+                if is_exact:
+                    exact.setdefault(need, []).append((event, delta))
+                else:
+                    counting.append((need, (event, delta)))
+            self.exact.append(exact)
+            self.counting.append(counting)
 
     # -- nodes ---------------------------------------------------------------------
     def node(self, level: int, children: dict[int, int]) -> int:
@@ -195,29 +215,37 @@ class MddSaturation:
 
     def _saturate(self, level: int, children: dict[int, int]) -> int:
         """Close `children` (a node of `level` being built, every child saturated)
-        under the transitions whose top is `level`, then intern it."""
-        events = self.by_top[level]
-        if events:
-            cap = self.caps[level]
-            pending = set(children)
-            while pending:
-                value = pending.pop()
-                for event in events:
-                    need, delta, exact = event.steps[level]
-                    if value != need if exact else value < need:
-                        continue
-                    image = self._fire(event, level + 1, children[value])
-                    if image == EMPTY:
-                        continue
-                    target = value + delta
-                    if target > cap:
-                        raise Unbounded(self.units[level][0])
-                    old = children.get(target, EMPTY)
-                    new = self.union(old, image)
-                    if new != old:
-                        children[target] = new
-                        pending.add(target)
-        return self.node(level, children)
+        under the transitions whose top is `level`, then intern it. The same node
+        built twice is closed once (`saturated`)."""
+        if not self.by_top[level]:
+            return self.node(level, children)
+        before = self.node(level, children)
+        done = self.saturated.get(before)
+        if done is not None:
+            return done
+        exact, counting = self.exact[level], self.counting[level]
+        cap = self.caps[level]
+        pending = set(children)
+        while pending:
+            value = pending.pop()
+            fired = exact.get(value, ())
+            if counting:
+                fired = [*fired, *(pair for need, pair in counting if value >= need)]
+            for event, delta in fired:
+                image = self._fire(event, level + 1, children[value])
+                if image == EMPTY:
+                    continue
+                target = value + delta
+                if target > cap:
+                    raise Unbounded(self.units[level][0])
+                old = children.get(target, EMPTY)
+                new = self.union(old, image)
+                if new != old:
+                    children[target] = new
+                    pending.add(target)
+        after = self.node(level, children)
+        self.saturated[before] = self.saturated[after] = after
+        return after
 
     def _fire(self, event: _Event, level: int, node: int) -> int:
         """The image of `node` (at `level`, below the event's top) under the event's
@@ -254,6 +282,97 @@ class MddSaturation:
         return made
 
     # -- questions -----------------------------------------------------------------
+    def tokens(self, level: int, value: int) -> int:
+        """Tokens the places of `level` hold when it takes `value`."""
+        return value if len(self.units[level]) == 1 else 1
+
+    def heaviest(self, root: int) -> int:
+        """The most tokens in one marking of `root` (-1 when empty)."""
+        memo = {EMPTY: -1, TERMINAL: 0}
+        for node in self._bottom_up(root):
+            level = self.level[node]
+            memo[node] = max(
+                self.tokens(level, v) + memo[c] if memo[c] >= 0 else -1
+                for v, c in self.children[node].items()
+            )
+        return memo[root]
+
+    def dead(self, root: int, check: Callable[[], None]) -> int:
+        """The markings of `root` that enable no transition, in one pass down the
+        diagram carrying the set of transitions whose guards have all held so far
+        (a bit mask): a transition leaves the set at a level whose value fails its
+        guard, and a path on which one is still in the set at its last level is not
+        dead. `check` raises to stop."""
+        if self.always_enabled:
+            return EMPTY
+        events = [e for level in self.by_top for e in level]
+        starts = [0] * self.levels
+        ends = [0] * self.levels
+        guards: list[list[tuple[int, int, bool]]] = [[] for _ in range(self.levels)]
+        for bit, event in enumerate(events):
+            starts[event.top] |= 1 << bit
+            ends[event.bottom] |= 1 << bit
+            for level, (need, _, exact) in event.steps.items():
+                guards[level].append((1 << bit, need, exact))
+        fails: dict[tuple[int, int], int] = {}
+        memo: dict[tuple[int, int], int] = {}
+        steps = 0
+
+        def failing(level: int, value: int) -> int:
+            mask = fails.get((level, value))
+            if mask is None:
+                mask = 0
+                for bit, need, exact in guards[level]:
+                    if value != need if exact else value < need:
+                        mask |= bit
+                fails[(level, value)] = mask
+            return mask
+
+        def walk(node: int, alive: int) -> int:
+            nonlocal steps
+            if node == TERMINAL:
+                return TERMINAL if alive == 0 else EMPTY
+            found = memo.get((node, alive))
+            if found is not None:
+                return found
+            steps += 1
+            if steps % CHECK_EVERY == 0:
+                check()
+            level = self.level[node]
+            alive |= starts[level]
+            kept: dict[int, int] = {}
+            for value, child in self.children[node].items():
+                left = alive & ~failing(level, value)
+                if left & ends[level]:
+                    continue  # a transition whose every guard held: enabled
+                part = walk(child, left)
+                if part != EMPTY:
+                    kept[value] = part
+            result = self.node(level, kept) if kept else EMPTY
+            memo[(node, alive & ~starts[level])] = result
+            return result
+
+        limit = sys.getrecursionlimit()
+        sys.setrecursionlimit(max(limit, 8 * self.levels + 1000))
+        try:
+            return walk(root, 0) if root != EMPTY else EMPTY
+        finally:
+            sys.setrecursionlimit(limit)
+
+    def pick(self, root: int) -> list[int]:
+        """One marking of `root` (non-empty), token counts in the net's order."""
+        marking = [0] * len(self.net.places)
+        node = root
+        while node != TERMINAL:
+            level = self.level[node]
+            value, node = min(self.children[node].items())
+            unit = self.units[level]
+            if len(unit) == 1:
+                marking[unit[0]] = value
+            else:
+                marking[unit[value]] = 1
+        return marking
+
     def largest(self, root: int) -> list[int]:
         """Per place (net order), the largest value it takes in `root`'s markings."""
         best = [0] * self.levels

@@ -38,6 +38,23 @@ def _never(nodes: int) -> str | None:
     return None
 
 
+def _go_on() -> None:
+    return None
+
+
+def _agrees(run: MddSaturation, root: int, net: Net) -> None:
+    """Count, bounds, heaviest marking and dead markings equal the search's."""
+    reachable = _reachable(net)
+    assert run.count(root) == len(reachable)
+    assert run.largest(root) == [max(m[p] for m in reachable) for p in range(len(net.places))]
+    assert run.heaviest(root) == max(sum(m) for m in reachable)
+    dead = [m for m in reachable if not any(net.enabled(m, t) for t in net.transitions)]
+    hit = run.dead(root, _go_on)
+    assert run.count(hit) == len(dead)
+    if dead:
+        assert tuple(run.pick(hit)) in dead
+
+
 def _mutex(n: int) -> Net:
     """n processes idle -> waiting -> critical -> idle around one lock, each process a
     unit of three places, the lock a unit with the critical places."""
@@ -62,6 +79,30 @@ def test_units_are_the_one_token_invariants() -> None:
     assert len(taken) == len(set(taken))  # disjoint
 
 
+def test_a_dead_end_is_found() -> None:
+    """Two processes each taking two locks in opposite orders: the classic deadlock."""
+    net = make_net(
+        "locks",
+        {"a0": 1, "a1": 0, "a2": 0, "b0": 1, "b1": 0, "b2": 0, "x": 1, "y": 1},
+        {
+            "a_x": ({"a0": 1, "x": 1}, {"a1": 1}),
+            "a_y": ({"a1": 1, "y": 1}, {"a2": 1}),
+            "a_done": ({"a2": 1}, {"a0": 1, "x": 1, "y": 1}),
+            "b_y": ({"b0": 1, "y": 1}, {"b1": 1}),
+            "b_x": ({"b1": 1, "x": 1}, {"b2": 1}),
+            "b_done": ({"b2": 1}, {"b0": 1, "x": 1, "y": 1}),
+        },
+    )
+    _, units = invariant_facts(net, 5.0)
+    run = MddSaturation(net, level_order(net, units, place_order(net)), [1] * 8, _never)
+    root = run.run(list(net.initial_marking()))
+    _agrees(run, root, net)
+    assert run.count(run.dead(root, _go_on)) == 1
+    result = explore_symbolic(net)
+    assert result.deadlock and result.deadlock_trace is not None
+    assert sorted(result.deadlock_trace) == ["a_x", "b_y"]
+
+
 @pytest.mark.parametrize("n", [1, 2, 4])
 def test_units_count_exactly(n: int) -> None:
     net = _mutex(n)
@@ -70,10 +111,7 @@ def test_units_count_exactly(n: int) -> None:
     assert sorted(p for level in levels for p in level) == list(range(len(net.places)))
     assert any(len(level) > 1 for level in levels)
     run = MddSaturation(net, levels, [b or 7 for b in bounds], _never)
-    root = run.run(list(net.initial_marking()))
-    reachable = _reachable(net)
-    assert run.count(root) == len(reachable)
-    assert run.largest(root) == [max(m[p] for m in reachable) for p in range(len(net.places))]
+    _agrees(run, run.run(list(net.initial_marking())), net)
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
@@ -82,10 +120,7 @@ def test_counters_count_exactly(net: Net) -> None:
     """One level per place (no units): the reachable markings of small random nets."""
     levels = [[p] for p in range(len(net.places))]
     run = MddSaturation(net, levels, [63] * len(net.places), _never)
-    root = run.run(list(net.initial_marking()))
-    reachable = _reachable(net)
-    assert run.count(root) == len(reachable)
-    assert run.largest(root) == [max(m[p] for m in reachable) for p in range(len(net.places))]
+    _agrees(run, run.run(list(net.initial_marking())), net)
 
 
 def test_a_place_past_its_cap_is_reported() -> None:
