@@ -142,7 +142,7 @@ class MddSaturation:
         self.level: list[int] = [self.levels, self.levels]
         self.unique: dict[tuple[int, tuple[tuple[int, int], ...]], int] = {}
         self.union_cache: dict[tuple[int, int], int] = {}
-        self.fire_cache: dict[tuple[int, int], int] = {}
+        self.fire_cache: list[dict[int, int]] = [{} for _ in net.transitions]
         self.saturated: dict[int, int] = {}
         self.calls = 0
         # per level, the events whose top it is: by the exact value they need (a
@@ -163,12 +163,13 @@ class MddSaturation:
 
     # -- nodes ---------------------------------------------------------------------
     def node(self, level: int, children: dict[int, int]) -> int:
-        """The unique node of `level` with these (non-empty) children."""
+        """The unique node of `level` with these (non-empty) children; a new node
+        keeps `children` itself, which the caller must not change afterwards."""
         key = (level, tuple(sorted(children.items())))
         found = self.unique.get(key)
         if found is not None:
             return found
-        self.children.append(dict(key[1]))
+        self.children.append(children)
         self.level.append(level)
         number = len(self.children) - 1
         self.unique[key] = number
@@ -219,7 +220,7 @@ class MddSaturation:
         built twice is closed once (`saturated`)."""
         if not self.by_top[level]:
             return self.node(level, children)
-        before = self.node(level, children)
+        before = self.node(level, dict(children))
         done = self.saturated.get(before)
         if done is not None:
             return done
@@ -252,8 +253,8 @@ class MddSaturation:
         steps from `level` down, saturated."""
         if level > event.bottom or node == EMPTY:
             return node
-        key = (event.index, node)
-        found = self.fire_cache.get(key)
+        cache = self.fire_cache[event.index]
+        found = cache.get(node)
         if found is not None:
             return found
         self.calls += 1
@@ -278,7 +279,7 @@ class MddSaturation:
             old = result.get(target)
             result[target] = image if old is None else self.union(old, image)
         made = self._saturate(level, result) if result else EMPTY
-        self.fire_cache[key] = made
+        cache[node] = made
         return made
 
     # -- questions -----------------------------------------------------------------
