@@ -470,11 +470,12 @@ key in the unique table, about 400 bytes against CUDD's 48): the node budget cou
 an MDD node this many times."""
 
 
-MDD_MAX_CALLS = 2_000_000
+MDD_MAX_CALLS = 600_000
 """Node images (cache misses of the recursive fire) after which node-level saturation
-gives up for the set-level schedule: Peterson-PT-3 needs 234,000 and
-DoubleExponent-PT-003 299,000; Dekker-PT-020 spends 2M in about 4.5 s without a
-fixpoint."""
+gives up for the set-level schedule: the conformance models that finish need at most
+299,000 (DoubleExponent-PT-003; Peterson-PT-3 234,000, Dekker-PT-015 215,000);
+Dekker-PT-020, where every process reads every other's flag, needs 3.8M (about 15 s)
+where the set-level schedule takes 2-5 s."""
 
 MDD_SHARE = 0.4
 """The share of the time left that node-level saturation may use before giving up."""
@@ -498,8 +499,8 @@ def _by_nodes(
 
     None when the node-level run gives up (`MDD_MAX_CALLS` images, or `MDD_SHARE` of
     the time left): the caller then runs the set-level schedule, which wins where every
-    transition reads the whole net (Dekker-PT-020: 17.9M node images and no fixpoint in
-    40 s here, 4.8 s by sets). A stopped fixpoint has no consistent partial set to
+    transition reads the whole net (Dekker-PT-020: 3.8M node images, about 15 s, here;
+    2-5 s by sets). A stopped fixpoint has no consistent partial set to
     count: it reports 0 states."""
     levels = level_order(net, units, place_order(net))
     order = [p for places in levels for p in places]
