@@ -9,13 +9,14 @@ from collections import deque
 
 import pytest
 from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import analysis.symbolic.explore as explore
 from analysis.symbolic import SymbolicLimits, explore_symbolic
 from analysis.symbolic.encoding import invariant_facts, level_order, place_order
 from analysis.symbolic.mdd import MddSaturation, Unbounded
 from coral_lang.net import Net
-from tests.analysis.nets import make_net
+from tests.analysis.nets import make_net, replay_names
 from tests.analysis.symbolic.test_saturate import small_nets
 
 
@@ -66,6 +67,54 @@ def _mutex(n: int) -> Net:
         transitions[f"enter{i}"] = ({f"wait{i}": 1, "lock": 1}, {f"crit{i}": 1})
         transitions[f"leave{i}"] = ({f"crit{i}": 1}, {f"idle{i}": 1, "lock": 1})
     return make_net("mutex", places, transitions)
+
+
+@st.composite
+def unit_nets(draw: st.DrawFn) -> Net:
+    """Processes (units of 2-3 places, one token each) whose moves may test a place of
+    another process and may take a token from or give one to a shared pool (paid from
+    or into a budget place, so the pool stays bounded)."""
+    sizes = draw(st.lists(st.integers(2, 3), min_size=1, max_size=3))
+    places: dict[str, int] = {}
+    for i, size in enumerate(sizes):
+        start = draw(st.integers(0, size - 1))
+        places |= {f"u{i}_{k}": int(k == start) for k in range(size)}
+    places |= {"pool": draw(st.integers(0, 2)), "budget": draw(st.integers(0, 2))}
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for n in range(draw(st.integers(1, 7))):
+        i = draw(st.integers(0, len(sizes) - 1))
+        a, b = draw(st.integers(0, sizes[i] - 1)), draw(st.integers(0, sizes[i] - 1))
+        ins, outs = {f"u{i}_{a}": 1}, {f"u{i}_{b}": 1}
+        if draw(st.booleans()):  # test another process's place
+            j = draw(st.integers(0, len(sizes) - 1))
+            if j != i:
+                c = f"u{j}_{draw(st.integers(0, sizes[j] - 1))}"
+                ins[c], outs[c] = 1, 1
+        pool = draw(st.sampled_from(["none", "take", "give"]))
+        if pool == "take":
+            ins["pool"], outs["budget"] = 1, 1
+        elif pool == "give":
+            ins["budget"], outs["pool"] = 1, 1
+        transitions[f"t{n}"] = (ins, outs)
+    return make_net("units", places, transitions)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(unit_nets())
+def test_processes_with_units_count_exactly(net: Net) -> None:
+    """Units as levels, tests across units and a shared counter: the same markings,
+    bounds, heaviest marking and dead markings as the search, through the whole run
+    too (deadlock verdict and a trace that replays)."""
+    bounds, units = invariant_facts(net, 5.0)  # a process some move touches is a unit
+    levels = level_order(net, units, place_order(net))
+    run = MddSaturation(net, levels, [b if b is not None else 15 for b in bounds], _never)
+    _agrees(run, run.run(list(net.initial_marking())), net)
+    result = explore_symbolic(net)
+    reachable = _reachable(net)
+    assert result.complete and result.states == len(reachable)
+    if result.deadlock:
+        assert result.deadlock_trace is not None
+        assert replay_names(net, result.deadlock_trace) == result.deadlock_marking
 
 
 def test_units_are_the_one_token_invariants() -> None:
