@@ -517,7 +517,10 @@ def _by_nodes(
             raise _GiveUp
         return deadline.reason(nodes * MDD_NODE_WEIGHT)
 
-    run = MddSaturation(net, levels, caps, check)
+    try:
+        run = MddSaturation(net, levels, caps, check)
+    except ValueError:  # a unit whose invariant the arcs break: never expected
+        return None
     bits = initial_bits(net, bounds=bounds)
     try:
         root = run.run([p.initial for p in net.places])

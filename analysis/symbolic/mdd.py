@@ -88,7 +88,9 @@ def _steps(
             continue  # the unit's invariant: no input from it, no output into it
         if len(taken) > 1 or taken[0][1] > 1:
             return None
-        (source, _), ((target, _),) = taken[0], given  # the invariant: one out, one in
+        if len(given) != 1 or given[0][1] != 1:  # the invariant: one in, one out
+            raise ValueError(f"places {sorted(places)} are not a unit")
+        source, target = taken[0][0], given[0][0]
         steps[k] = (source, target - source, True)
     return steps
 

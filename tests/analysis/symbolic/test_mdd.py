@@ -193,3 +193,11 @@ def test_giving_up_falls_back_to_sets(monkeypatch: pytest.MonkeyPatch) -> None:
     assert nodes.states == sets.states == len(_reachable(net))
     assert nodes.iterations != sets.iterations  # a different schedule ran
     assert (nodes.deadlock, nodes.max_tokens_place) == (sets.deadlock, sets.max_tokens_place)
+
+
+def test_a_level_that_is_not_a_unit_is_refused() -> None:
+    """Two places grouped as a unit that a transition empties: refused, never a wrong
+    step (the caller then keeps to the set-level schedule)."""
+    net = make_net("leak", {"a": 1, "b": 0}, {"t": ({"a": 1}, {})})
+    with pytest.raises(ValueError, match="not a unit"):
+        MddSaturation(net, [[0, 1]], [1, 1], _never)
