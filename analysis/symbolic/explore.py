@@ -1,7 +1,11 @@
-"""The reachable markings as a BDD, by a saturation-style fixpoint over per-transition
-relations (`analysis.symbolic.saturate`; chaining kept to measure against).
+"""The reachable markings of a net and the StateSpace answers from them.
 
-Each transition gets its own relation over only the places it touches (a partitioned
+By default by saturation on the nodes of a multi-valued diagram (`analysis.symbolic.mdd`,
+answered on it; `_by_nodes`); when that gives up, or with `strategy="sets"` or
+`"chaining"`, as a BDD by a set-level fixpoint over per-transition relations
+(`analysis.symbolic.saturate`; chaining kept to measure against).
+
+For the BDD, each transition gets its own relation over only the places it touches (a partitioned
 relation): places it reads without changing are a guard on the current bits, places it
 changes map current bits to next bits. Images are `and_exists` then a rename. The
 chained schedule applies the transitions in order of their top place in the variable
