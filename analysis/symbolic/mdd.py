@@ -163,6 +163,12 @@ class MddSaturation:
             self.exact.append(exact)
             self.counting.append(counting)
 
+    def widest_test(self) -> int:
+        """The most levels one transition tests without changing them (a guard that
+        reads every other process, as Dekker's `enter` does)."""
+        events = (e for level in self.by_top for e in level)
+        return max((sum(1 for s in e.steps.values() if s[1] == 0) for e in events), default=0)
+
     # -- nodes ---------------------------------------------------------------------
     def node(self, level: int, children: dict[int, int]) -> int:
         """The unique node of `level` with these (non-empty) children; a new node

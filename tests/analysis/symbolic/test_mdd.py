@@ -16,8 +16,10 @@ from analysis.symbolic import SymbolicLimits, explore_symbolic
 from analysis.symbolic.encoding import invariant_facts, level_order, place_order
 from analysis.symbolic.mdd import MddSaturation, Unbounded
 from coral_lang.net import Net
+from coral_lang.pnml.read import read_pnml
 from tests.analysis.nets import make_net, replay_names
 from tests.analysis.symbolic.test_saturate import small_nets
+from tests.conftest import CONFORMANCE
 
 
 def _reachable(net: Net) -> set[tuple[int, ...]]:
@@ -201,3 +203,16 @@ def test_a_level_that_is_not_a_unit_is_refused() -> None:
     net = make_net("leak", {"a": 1, "b": 0}, {"t": ({"a": 1}, {})})
     with pytest.raises(ValueError, match="not a unit"):
         MddSaturation(net, [[0, 1]], [1, 1], _never)
+
+
+@pytest.mark.parametrize(("model", "tested"), [("Dekker-PT-010", 9), ("Peterson-PT-2", 1)])
+def test_widest_test_counts_levels_read_and_left_unchanged(model: str, tested: int) -> None:
+    """Dekker's `enter_i` tests the flag of each of the 9 other processes (the rule
+    `WIDE_TESTS` sends such nets to the set-level schedule); Peterson's moves test one
+    other place at most."""
+    net = read_pnml(CONFORMANCE / "pnml" / f"{model}.pnml")
+    bounds, units = invariant_facts(net, 5.0)
+    levels = level_order(net, units, place_order(net))
+    run = MddSaturation(net, levels, [b if b is not None else 15 for b in bounds], _never)
+    assert run.widest_test() == tested
+    assert (tested >= explore.WIDE_TESTS) == (model == "Dekker-PT-010")
