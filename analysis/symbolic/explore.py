@@ -73,7 +73,9 @@ NODE_CHECK_SECONDS = 0.1
 @dataclass
 class SymbolicResult:
     """What the fixpoint learned. `complete` False means `reason` says which budget
-    stopped it; the counts then describe the markings found so far (a lower bound)."""
+    stopped it; the counts then describe the markings found so far (a lower bound).
+    `peak_nodes` and `iterations` are the MDD's nodes and node images after node
+    saturation, the BDD's peak nodes and rounds (or sweeps) after a set-level one."""
 
     complete: bool
     reason: str | None
