@@ -1,6 +1,7 @@
-"""Symbolic state spaces: the reachable markings of a P/T net as a binary decision
-diagram (CUDD through ``dd.cudd``), for nets whose state space no explicit search can
-store. See docs/analysis-methods.md, "Symbolic state spaces".
+"""Symbolic state spaces: the reachable markings of a P/T net as a decision diagram
+(a multi-valued one built by node saturation; binary ones through CUDD, ``dd.cudd``),
+for nets whose state space no explicit search can store. See docs/analysis-methods.md,
+"Symbolic state spaces".
 
 The exploration is imported on first use: loading CUDD costs about 0.15 s, which a
 run that never builds a diagram should not pay."""

@@ -157,10 +157,86 @@ def invariant_bounds(net: Net, seconds: float) -> list[int | None]:
     semiflows from `analysis.invariants`), None where no invariant covers it or the
     search ran out of `seconds` first (each invariant found is genuine, so a partial
     basis still gives sound bounds). Tens of milliseconds on the conformance nets."""
+    return invariant_facts(net, seconds)[0]
+
+
+def invariant_facts(net: Net, seconds: float) -> tuple[list[int | None], list[list[int]]]:
+    """The bounds of `invariant_bounds` and the *units*: disjoint sets of at least two
+    places that always hold exactly one token together (a P-invariant of weights 1
+    whose initial value is 1), the largest first. A unit is one multi-valued level of
+    `analysis.symbolic.mdd` (the place that holds the token), the NUPN units of MCC
+    nets recovered from the net itself."""
     from analysis.budget import Budget
     from analysis.invariants import invariant_bounds as bounds_of
     from analysis.invariants import p_invariants
 
     basis = p_invariants(net, budget=Budget(max(0.0, seconds)))
     found = bounds_of(net, basis)
-    return [found.get(p.name) for p in net.places]
+    initial = [p.initial for p in net.places]
+    candidates = [
+        sorted(inv.support)
+        for inv in basis.invariants
+        if len(inv.support) > 1
+        and all(w in (0, 1) for w in inv.weights)
+        and inv.value(initial) == 1
+    ]
+    candidates.sort(key=lambda support: (-len(support), support))
+    units: list[list[int]] = []
+    taken: set[int] = set()
+    for support in candidates:
+        if taken.isdisjoint(support):
+            units.append(support)
+            taken.update(support)
+    return [found.get(p.name) for p in net.places], units
+
+
+def level_order(net: Net, units: Sequence[Sequence[int]], order: Sequence[int]) -> list[list[int]]:
+    """The levels of a multi-valued diagram: every unit one level, every other place
+    its own, each unit's places in `order`; the levels sorted by the mean position of
+    their places in `order`, then moved by FORCE over levels (each transition pulls
+    the levels it touches together) when that shortens the total span."""
+    position = {p: i for i, p in enumerate(order)}
+    in_unit = {p for unit in units for p in unit}
+    levels = [sorted(unit, key=position.__getitem__) for unit in units]
+    levels += [[p] for p in order if p not in in_unit]
+    levels.sort(key=lambda places: sum(position[p] for p in places) / len(places))
+    level_of = {p: k for k, places in enumerate(levels) for p in places}
+    index = {p.name: i for i, p in enumerate(net.places)}
+    supports = [
+        sorted({level_of[index[name]] for name, _ in (*tr.inputs, *tr.outputs)})
+        for tr in net.transitions
+    ]
+    start = force(len(levels), [s for s in supports if len(s) > 1], list(range(len(levels))))
+    return [levels[k] for k in start]
+
+
+def force(
+    size: int, supports: Sequence[Sequence[int]], start: list[int], rounds: int = 40
+) -> list[int]:
+    """FORCE (Aloul, Markov and Sakallah 2003; see `force_order`) on items 0..size-1
+    with hyperedges `supports`: the order of least total span seen, `start` included."""
+
+    def span(order: Sequence[int]) -> int:
+        position = {p: i for i, p in enumerate(order)}
+        return sum(max(position[p] for p in s) - min(position[p] for p in s) for s in supports)
+
+    touching: list[list[int]] = [[] for _ in range(size)]
+    for k, support in enumerate(supports):
+        for p in support:
+            touching[p].append(k)
+    order = list(start)
+    best, best_cost = list(order), span(order)
+    for _ in range(rounds):
+        position = {p: i for i, p in enumerate(order)}
+        centre = [sum(position[p] for p in s) / len(s) for s in supports]
+        target = {
+            p: sum(centre[k] for k in touching[p]) / len(touching[p])
+            if touching[p]
+            else position[p]
+            for p in order
+        }
+        order = sorted(order, key=lambda p: (target[p], position[p]))
+        cost = span(order)
+        if cost < best_cost:
+            best, best_cost = list(order), cost
+    return best

@@ -1,7 +1,11 @@
-"""The reachable markings as a BDD, by a saturation-style fixpoint over per-transition
-relations (`analysis.symbolic.saturate`; chaining kept to measure against).
+"""The reachable markings of a net and the StateSpace answers from them.
 
-Each transition gets its own relation over only the places it touches (a partitioned
+By default by saturation on the nodes of a multi-valued diagram (`analysis.symbolic.mdd`,
+answered on it; `_by_nodes`); when that gives up, or with `strategy="sets"` or
+`"chaining"`, as a BDD by a set-level fixpoint over per-transition relations
+(`analysis.symbolic.saturate`; chaining kept to measure against).
+
+For the BDD, each transition gets its own relation over only the places it touches (a partitioned
 relation): places it reads without changing are a guard on the current bits, places it
 changes map current bits to next bits. Images are `and_exists` then a rename. The
 chained schedule applies the transitions in order of their top place in the variable
@@ -21,7 +25,14 @@ from typing import Any, Literal
 import dd.cudd as cudd
 
 from analysis.budget import Budget, memory_limit_reason, resident_bytes
-from analysis.symbolic.encoding import Encoding, initial_bits, invariant_bounds, place_order
+from analysis.symbolic.encoding import (
+    Encoding,
+    initial_bits,
+    invariant_facts,
+    level_order,
+    place_order,
+)
+from analysis.symbolic.mdd import MddSaturation, Stopped, Unbounded
 from analysis.symbolic.saturate import Saturation
 from analysis.symbolic.trace import TraceError, shortest_to_dead
 from coral_lang.net import Net
@@ -44,9 +55,11 @@ class SymbolicLimits:
     trace: bool = True
     """Search a shortest firing sequence to a dead marking (forward layers of images,
     `analysis.symbolic.trace`)."""
-    strategy: Literal["saturation", "chaining"] = "saturation"
-    """The fixpoint's schedule (`analysis.symbolic.saturate`); chaining is the older
-    one, kept to measure against."""
+    strategy: Literal["saturation", "sets", "chaining"] = "saturation"
+    """The fixpoint's schedule: saturation on the nodes of a multi-valued diagram
+    (`analysis.symbolic.mdd`, then converted to a BDD); "sets", the set-level schedule
+    of `analysis.symbolic.saturate`, and "chaining", the oldest, kept to measure
+    against."""
 
 
 BYTES_PER_NODE = 48
@@ -60,7 +73,9 @@ NODE_CHECK_SECONDS = 0.1
 @dataclass
 class SymbolicResult:
     """What the fixpoint learned. `complete` False means `reason` says which budget
-    stopped it; the counts then describe the markings found so far (a lower bound)."""
+    stopped it; the counts then describe the markings found so far (a lower bound).
+    `peak_nodes` and `iterations` are the MDD's nodes and node images after node
+    saturation, the BDD's peak nodes and rounds (or sweeps) after a set-level one."""
 
     complete: bool
     reason: str | None
@@ -159,11 +174,12 @@ class SymbolicNet:
         limits: SymbolicLimits,
         deadline: _Deadline | None = None,
         proven: frozenset[int] = frozenset(),
+        order: list[int] | None = None,
     ) -> None:
         self.net = net
         self.proven = proven  # places whose bits hold a P-invariant bound
         self.limits = limits
-        self.enc = Encoding(tuple(place_order(net)), tuple(bits))
+        self.enc = Encoding(tuple(place_order(net) if order is None else order), tuple(bits))
         self.bdd = cudd.BDD()
         self.bdd.configure(reordering=False)
         max_memory = limits.max_memory
@@ -392,11 +408,15 @@ def explore_symbolic(net: Net, limits: SymbolicLimits | None = None) -> Symbolic
     left = limits.budget.remaining() if limits.budget is not None else None
     if left is not None:
         seconds.append(left)
-    bounds = invariant_bounds(net, min(seconds))
+    bounds, units = invariant_facts(net, min(seconds))
     bits = initial_bits(net, bounds=bounds)
     proven = frozenset(p for p, b in enumerate(bounds) if b is not None)
     conserved_bits = _conserved_bits(net)
     deadline = _Deadline(limits, start)
+    if limits.strategy == "saturation":
+        result = _by_nodes(net, bounds, units, limits, deadline, start)
+        if result is not None:
+            return result
     while True:
         try:
             sym = SymbolicNet(net, bits, limits, deadline, proven)
@@ -448,6 +468,149 @@ _OUT_OF_MEMORY = (MemoryError, RuntimeError, ValueError)
 """What dd.cudd raises when CUDD returns no node (its `max_memory` reached): a
 RuntimeError naming memory from most operators, a ValueError about a NULL node from
 `and_exists`. `_memory_reason` re-raises the ones that are not about memory."""
+
+
+MDD_NODE_WEIGHT = 40
+"""BDD nodes' worth of memory per MDD node: its dictionary of children, its key in the
+unique table and its share of the union, image and saturation caches, 2.25 KB a node
+measured on Peterson-PT-3 (resident growth over the fixpoint, 56,774 nodes), against
+CUDD's 48 bytes. The node budget counts an MDD node this many times."""
+
+
+MDD_MAX_CALLS = 600_000
+"""Node images (cache misses of the recursive fire) after which node-level saturation
+gives up for the set-level schedule: the conformance models that finish need at most
+299,000 (DoubleExponent-PT-003; Peterson-PT-3 234,000, Dekker-PT-015 215,000);
+Dekker-PT-020, where every process reads every other's flag, needs 3.8M (about 15 s)
+where the set-level schedule takes 2-5 s."""
+
+MDD_SHARE = 0.4
+"""The share of the time left that node-level saturation may use before giving up."""
+
+
+WIDE_TESTS = 8
+"""A transition testing this many levels without changing them sends the net to the
+set-level schedule at once. Node saturation rebuilds every level such a transition
+tests, at every image, where a BDD relational product takes the guard as one cube:
+Dekker-PT-015/020 (14 and 19 tested levels) take 0.3 and 1.7-3 s by sets against 0.5
+and about 15 s by nodes. Every other conformance model tests at most 3 levels in one
+transition. A rule from one family, so a cautious threshold; Dekker-PT-010 (9) is
+equally fast either way."""
+
+
+class _GiveUp(Exception):
+    """Node-level saturation used its share; the set-level schedule takes over."""
+
+
+def _by_nodes(
+    net: Net,
+    bounds: list[int | None],
+    units: list[list[int]],
+    limits: SymbolicLimits,
+    deadline: _Deadline,
+    start: float,
+) -> SymbolicResult | None:
+    """The reachable markings by saturation on MDD nodes (`analysis.symbolic.mdd`),
+    then as a BDD whose counters have exactly the bits of the largest value each place
+    took (so no counter can overflow: every place is `proven`), for the answers.
+
+    None when the node-level run gives up (`MDD_MAX_CALLS` images, or `MDD_SHARE` of
+    the time left): the caller then runs the set-level schedule, which wins where every
+    transition reads the whole net (Dekker-PT-020: 3.8M node images, about 15 s, here;
+    2-5 s by sets). A stopped fixpoint has no consistent partial set to
+    count: it reports 0 states."""
+    levels = level_order(net, units, place_order(net))
+    order = [p for places in levels for p in places]
+    top = (1 << limits.max_bits) - 1
+    caps = [top if b is None else b for b in bounds]
+    left = [limits.time_limit - (time.monotonic() - start)] if limits.time_limit else []
+    remaining = limits.budget.remaining() if limits.budget is not None else None
+    if remaining is not None:
+        left.append(remaining)
+    give_up = time.monotonic() + MDD_SHARE * min(left) if left else None
+
+    def check(nodes: int) -> str | None:
+        if run.calls > MDD_MAX_CALLS or (give_up is not None and time.monotonic() > give_up):
+            raise _GiveUp
+        return deadline.reason(nodes * MDD_NODE_WEIGHT)
+
+    try:
+        run = MddSaturation(net, levels, caps, check)
+    except ValueError:  # a unit whose invariant the arcs break: never expected
+        return None
+    if run.widest_test() >= WIDE_TESTS:
+        return None
+    bits = initial_bits(net, bounds=bounds)
+    try:
+        root = run.run([p.initial for p in net.places])
+    except (_GiveUp, RecursionError):
+        return None
+    except Stopped as exc:
+        return _stopped(net, bits, start, str(exc))
+    except Unbounded as over:
+        name = net.places[over.place].name
+        return _stopped(
+            net, bits, start, f"place(s) {name} exceed {top} tokens: the net may be unbounded"
+        )
+    largest = run.largest(root)
+    bits = [max(1, v.bit_length()) for v in largest]
+    try:
+        return _node_answers(net, run, root, largest, order, limits, deadline, start)
+    except _Budget as exc:
+        return _stopped(net, bits, start, f"{exc} (after the fixpoint)")
+    except _OUT_OF_MEMORY as exc:
+        return _stopped(net, bits, start, _memory_reason(limits, exc))
+
+
+def _node_answers(
+    net: Net,
+    run: MddSaturation,
+    root: int,
+    largest: list[int],
+    order: list[int],
+    limits: SymbolicLimits,
+    deadline: _Deadline,
+    start: float,
+) -> SymbolicResult:
+    """Count, bounds and dead markings on the MDD itself (tens of thousands of nodes
+    where the BDD of the same set, with binary counters, has ten times more: the BDD
+    passes took 10 of DoubleExponent-PT-003's 12 s). A BDD is built only for the
+    shortest trace to a dead marking (`analysis.symbolic.trace`), over the dead
+    markings alone. Raises `_Budget` on a limit."""
+    bits = [max(1, v.bit_length()) for v in largest]
+    states = run.count(root)
+    heaviest = run.heaviest(root)
+    dead = run.dead(root, deadline.check)
+    witness: dict[str, int] | None = None
+    trace = None
+    peak = len(run.children)
+    if dead != 0:
+        marking = run.pick(dead)
+        if limits.trace:
+            sym = SymbolicNet(net, bits, limits, deadline, frozenset(range(len(bits))), order)
+            try:
+                marking, trace = shortest_to_dead(
+                    sym, run.to_bdd(dead, sym.value, sym.bdd), deadline.check
+                )
+            except (_Budget, TraceError):
+                trace = None  # the witness marking stands without its trace
+            peak = max(peak, len(sym.bdd))
+        witness = {net.places[p].name: v for p, v in enumerate(marking) if v}
+    return SymbolicResult(
+        complete=True,
+        reason=None,
+        states=states,
+        max_tokens_place=max(largest, default=0),
+        max_tokens_marking=heaviest,
+        place_bounds={p.name: largest[i] for i, p in enumerate(net.places)},
+        deadlock=dead != 0,
+        deadlock_marking=witness,
+        deadlock_trace=trace,
+        seconds=time.monotonic() - start,
+        peak_nodes=peak,
+        iterations=run.calls,
+        bits=bits,
+    )
 
 
 def _memory_reason(limits: SymbolicLimits, exc: BaseException) -> str:

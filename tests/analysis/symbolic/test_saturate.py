@@ -1,4 +1,4 @@
-"""Both fixpoint schedules against a plain breadth-first search of small random nets:
+"""The fixpoint schedules against a plain breadth-first search of small random nets:
 the same markings counted, the same bounds, the same deadlock verdict, and a trace to
 a dead marking that replays and is as short as the closest dead marking."""
 
@@ -65,7 +65,7 @@ def _bfs(net: Net) -> tuple[int, int, int, int | None]:
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
-@given(small_nets(), st.sampled_from(["saturation", "chaining"]))
+@given(small_nets(), st.sampled_from(["saturation", "sets", "chaining"]))
 def test_schedules_agree_with_breadth_first_search(net: Net, strategy: str) -> None:
     states, place_max, marking_max, dead_at = _bfs(net)
     result = explore_symbolic(net, SymbolicLimits(time_limit=20, strategy=strategy))  # type: ignore[arg-type]
