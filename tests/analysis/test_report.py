@@ -181,6 +181,7 @@ def test_a_property_that_is_not_required_says_so_where_it_is_located() -> None:
 
 def test_element_span_finds_places_and_transitions_by_name() -> None:
     net = compile_file(EXAMPLES / "pool_mission" / "pool_mission.coral").net
+    assert net is not None
     place, transition = net.places[0], net.transitions[0]
     assert element_span(net, place.name) == place.span is not None
     assert element_span(net, transition.name) == transition.span is not None
