@@ -10,6 +10,10 @@ from dataclasses import dataclass
 
 from coral_lang.net import Net
 
+FORCE_WORK = 400_000
+"""Most hyperedge entries `force` visits over all its rounds (every conformance net
+keeps its 40 rounds)."""
+
 
 def span_sum(net: Net, order: Sequence[int]) -> int:
     """The sum over transitions of the distance between their first and last place in
@@ -36,36 +40,13 @@ def place_order(net: Net) -> list[int]:
 
 def force_order(net: Net, start: Sequence[int], rounds: int = 40) -> list[int]:
     """FORCE (Aloul, Markov and Sakallah, "FORCE: a fast and easy-to-implement
-    variable-ordering heuristic", GLSVLSI 2003): each transition pulls its places
-    towards their centre of gravity; every round moves each place to the mean centre of
-    the transitions touching it and sorts. The best order seen by `span_sum` wins."""
+    variable-ordering heuristic", GLSVLSI 2003) over the places, each transition a
+    hyperedge (`force`)."""
     index = {p.name: i for i, p in enumerate(net.places)}
     supports = [
         sorted({index[name] for name, _ in (*tr.inputs, *tr.outputs)}) for tr in net.transitions
     ]
-    supports = [s for s in supports if s]
-    touching: list[list[int]] = [[] for _ in net.places]
-    for k, support in enumerate(supports):
-        for p in support:
-            touching[p].append(k)
-    order = list(start)
-    best, best_cost = list(order), span_sum(net, order)
-    for _ in range(rounds):
-        position = {p: i for i, p in enumerate(order)}
-        centre = [sum(position[p] for p in s) / len(s) for s in supports]
-        target = {
-            p: (
-                sum(centre[k] for k in touching[p]) / len(touching[p])
-                if touching[p]
-                else position[p]
-            )
-            for p in order
-        }
-        order = sorted(order, key=lambda p: (target[p], position[p]))
-        cost = span_sum(net, order)
-        if cost < best_cost:
-            best, best_cost = list(order), cost
-    return best
+    return force(len(net.places), [s for s in supports if s], list(start), rounds)
 
 
 def locality_order(net: Net) -> list[int]:
@@ -213,8 +194,14 @@ def level_order(net: Net, units: Sequence[Sequence[int]], order: Sequence[int]) 
 def force(
     size: int, supports: Sequence[Sequence[int]], start: list[int], rounds: int = 40
 ) -> list[int]:
-    """FORCE (Aloul, Markov and Sakallah 2003; see `force_order`) on items 0..size-1
-    with hyperedges `supports`: the order of least total span seen, `start` included."""
+    """FORCE (Aloul, Markov and Sakallah 2003) on items 0..size-1 with hyperedges
+    `supports`: each hyperedge pulls its items towards their centre of gravity; every
+    round moves each item to the mean centre of the hyperedges touching it and sorts.
+    The order of least total span seen wins, `start` included. At most `FORCE_WORK`
+    hyperedge entries are visited in all (fewer rounds on wide nets: 40 rounds over
+    the 40,000 arcs of 2,000 rings took 11 s, outside any time limit)."""
+    entries = sum(len(s) for s in supports)
+    rounds = min(rounds, max(1, FORCE_WORK // max(1, entries)))
 
     def span(order: Sequence[int]) -> int:
         position = {p: i for i, p in enumerate(order)}

@@ -253,10 +253,15 @@ class SymbolicNet:
         return result & ~carry
 
     def marking_cube(self, marking: list[int], *, current: bool) -> Bdd:
-        cube = self.bdd.true
+        """The cube of one marking over every place's x (or y) bits, in one call: a
+        cube costs the number of declared variables, so a cube per place, conjoined,
+        cost their square (20,000 places: 196 s)."""
+        literals: dict[str, bool] = {}
         for p, v in enumerate(marking):
-            cube &= self.value(p, v, current=current)
-        return cube
+            names = self.enc.xs(p) if current else self.enc.ys(p)
+            k = len(names)
+            literals.update({name: bool((v >> (k - 1 - i)) & 1) for i, name in enumerate(names)})
+        return self.bdd.cube(literals)
 
     def _transition(self, name: str, pre: dict[int, int], post: dict[int, int]) -> _Transition:
         bdd = self.bdd
