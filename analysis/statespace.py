@@ -1068,6 +1068,9 @@ class _Explorer:
         self.seen = np.zeros(fnet.n_seen, dtype=bool)  # (component, value) pairs met
         self.seen[fnet.offsets[self.onehot_fields] + fnet.initial[self.onehot_fields]] = True
         self.partial_fields = np.flatnonzero(fnet.partial)
+        sizes = np.diff(np.append(fnet.offsets, fnet.n_seen))
+        self.onehot_sizes = sizes[self.onehot_fields]
+        self.unseen_fields = self.onehot_fields  # components with values not yet met
         self.tokens_exact = int(np.count_nonzero(fnet.exact))  # one token in each
         self.max_marking = int(cn.initial.sum())
         # States ``0 .. recorded - 1`` are in the bounds (`record`); the others were
@@ -1391,14 +1394,21 @@ class _Explorer:
             total = int(counts.sum(axis=0, dtype=np.int64).max())
         else:
             total = 0
-        if self.partial_fields.size and new.shape[1]:  # those components may be empty
+        # components that may be empty, unless every one held a token in some marking
+        # already (and there are no counts): then no marking holds more
+        most = self.tokens_exact + self.partial_fields.size
+        if self.partial_fields.size and new.shape[1] and (counts.size or self.max_marking < most):
             held = new.take(self.partial_fields, axis=0) != 0
             total = int((counts.sum(axis=0, dtype=np.int64) + held.sum(axis=0)).max())
         self.max_marking = max(self.max_marking, self.tokens_exact + total)
-        if self.onehot_fields.size and new.shape[1]:
-            values = new.take(self.onehot_fields, axis=0).astype(np.int64)
-            values += self.fnet.offsets[self.onehot_fields][:, None]
+        if self.unseen_fields.size and new.shape[1]:
+            values = new.take(self.unseen_fields, axis=0).astype(np.int64)
+            values += self.fnet.offsets[self.unseen_fields][:, None]
             self.seen[values.reshape(-1)] = True
+            # components whose every value was met need no more looking at (Dekker: all
+            # of them after the first layers)
+            met = np.add.reduceat(self.seen, self.fnet.offsets[self.onehot_fields])
+            self.unseen_fields = self.onehot_fields[met < self.onehot_sizes]
 
     def insert(
         self,
