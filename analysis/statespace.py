@@ -4,14 +4,16 @@ Breadth first, one layer at a time, vectorised over the frontier with numpy:
 
 1. a block of the frontier (markings as columns of small integers: the field values
    of `analysis.encoding.FieldNet`, one per count or component) is checked against
-   every transition's preset at once, giving an enabled matrix whose non-zeros are the
-   edges (all counted, as the MCC counts them); on nets with hundreds of transitions
-   that take a component's token, those are looked up by the component's value instead
-   (`_EnablingIndex`);
+   every transition's preset at once, giving the enabled transitions of each marking
+   as bit sets, one ``uint64`` per 64 transitions ANDed from a few tables indexed by
+   field values (`_EnablingBits`), or where those tables do not fit, an enabled
+   matrix; their set bits are the edges (all counted, as the MCC counts them); on nets
+   with hundreds of transitions that take a component's token, those are looked up by
+   the component's value instead (`_EnablingIndex`);
 2. *sleep sets* (`SleepSets`) drop the edges whose successor another edge is sure to
    reach in the same layer, typically three quarters of them on concurrent nets: only
-   the others are fired (where the whole enabled matrix is built, counts, sleep sets
-   and self-loops are applied to the matrix and only the fired entries are listed);
+   the others are fired (sleep sets and self-loops are masks over the bit sets, or
+   applied to the matrix, and only the fired edges are listed);
 3. each fired edge yields its successor's *packed key* by one addition per key word
    (see `analysis.encoding.Layout`; one-hot components make most markings one word),
    never a full row;
