@@ -851,7 +851,7 @@ class _CountKeys:
         return trans, np.repeat(col, count)
 
 
-_BitTable = tuple[npt.NDArray[np.int64], npt.NDArray[np.intp], list[int], npt.NDArray[np.uint64]]
+_BitTable = tuple[npt.NDArray[np.int64], list[np.int32], list[int], npt.NDArray[np.uint64]]
 """One table of `_EnablingBits`: fields, weights, clipping bounds, rows of words."""
 
 
@@ -923,7 +923,7 @@ class _EnablingBits:
             self.tables.append(
                 (
                     np.asarray(group, dtype=np.int64),
-                    np.asarray(weights, dtype=np.intp)[:, None],
+                    [np.int32(w) for w in weights],
                     clip,
                     self.pack(table),
                 )
@@ -968,14 +968,23 @@ class _EnablingBits:
 
     def enabled(self, cols: npt.NDArray[np.integer]) -> npt.NDArray[np.uint64]:
         """``(n, words)``: the transitions each column enables, as bits."""
-        out = np.empty((cols.shape[1], self.words), dtype=np.uint64)
-        out[:] = self.always
+        out: npt.NDArray[np.uint64] | None = None
         for (fields, weights, _, table), clip in zip(self.tables, self.clips, strict=True):
             values = cols.take(fields, axis=0)
             if clip is not None:
                 np.minimum(values, clip, out=values)
-            row = (values.astype(np.intp) * weights).sum(axis=0)
-            out &= table.take(row, axis=0)
+            # (a row per field in 32 bits: 4x faster than a sum over a 64-bit matrix)
+            row = values[0].astype(np.int32) * weights[0]
+            for k in range(1, len(weights)):
+                row += values[k] * weights[k]
+            rows = table.take(row, axis=0)
+            if out is None:
+                out = rows
+            else:
+                out &= rows
+        if out is None:
+            return np.repeat(self.always[None, :], cols.shape[1], axis=0)
+        out &= self.always
         return out
 
     def edges(self, bits: npt.NDArray[np.uint64]) -> Edges:
@@ -1585,11 +1594,13 @@ class _Explorer:
         if self.repeat_table.size < 1 << bits:
             self.repeat_table = np.empty(1 << bits, dtype=np.int32)
         flat = keys.reshape(-1)
-        slot = flat * np.uint64(0x9E3779B97F4A7C15)
-        slot >>= np.uint64(64 - bits)
-        # written backwards: the last write, the first key of each slot, stays
-        self.repeat_table[slot[::-1]] = np.arange(m - 1, -1, -1, dtype=np.int32)
-        winner = self.repeat_table.take(slot)
+        # hashed backwards: the last write to a slot, the first key there, stays (and a
+        # contiguous signed index is written three times faster than a uint64 one)
+        backwards = flat[::-1] * np.uint64(0x9E3779B97F4A7C15)
+        backwards >>= np.uint64(64 - bits)
+        slot = backwards.view(np.int64)  # (below 2**bits)
+        self.repeat_table[slot] = np.arange(m - 1, -1, -1, dtype=np.int32)
+        winner = self.repeat_table.take(slot[::-1])
         # (m < 2**31: a step's edges; ``<``: only an earlier copy makes a repeat)
         repeat = winner < np.arange(m, dtype=np.int32)
         repeat &= flat.take(winner) == flat
