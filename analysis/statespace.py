@@ -4,14 +4,16 @@ Breadth first, one layer at a time, vectorised over the frontier with numpy:
 
 1. a block of the frontier (markings as columns of small integers: the field values
    of `analysis.encoding.FieldNet`, one per count or component) is checked against
-   every transition's preset at once, giving an enabled matrix whose non-zeros are the
-   edges (all counted, as the MCC counts them); on nets with hundreds of transitions
-   that take a component's token, those are looked up by the component's value instead
-   (`_EnablingIndex`);
+   every transition's preset at once, giving the enabled transitions of each marking
+   as bit sets, one ``uint64`` per 64 transitions ANDed from a few tables indexed by
+   field values (`_EnablingBits`), or where those tables do not fit, an enabled
+   matrix; their set bits are the edges (all counted, as the MCC counts them); on nets
+   with hundreds of transitions that take a component's token, those are looked up by
+   the component's value instead (`_EnablingIndex`);
 2. *sleep sets* (`SleepSets`) drop the edges whose successor another edge is sure to
    reach in the same layer, typically three quarters of them on concurrent nets: only
-   the others are fired (where the whole enabled matrix is built, counts, sleep sets
-   and self-loops are applied to the matrix and only the fired entries are listed);
+   the others are fired (sleep sets and self-loops are masks over the bit sets, or
+   applied to the matrix, and only the fired edges are listed);
 3. each fired edge yields its successor's *packed key* by one addition per key word
    (see `analysis.encoding.Layout`; one-hot components make most markings one word),
    never a full row;
@@ -358,6 +360,16 @@ REPEAT_FILTER_MIN = 1 << 12
 
 REPEAT_FILTER_DEGREE = 2.0
 """... on nets whose markings enable at least this many transitions on average."""
+
+BIT_TABLE_ROWS = 1 << 12
+"""Most rows of one table of `_EnablingBits` (32 KiB per word of transitions)..."""
+
+BIT_TABLES_MIN = 4
+"""... and enabling goes by such tables when there are at most this many of them, or
+one per `BIT_TABLE_TRANSITIONS` transitions; more, and the dense test costs less."""
+
+BIT_TABLE_TRANSITIONS = 16
+
 
 DENSE_DELTA_CELLS = 1 << 24
 """Largest places x transitions for a dense effect matrix (successor columns by one
@@ -845,6 +857,164 @@ class _CountKeys:
         return trans, np.repeat(col, count)
 
 
+_BitTable = tuple[npt.NDArray[np.int64], list[np.int32], list[int], npt.NDArray[np.uint64]]
+"""One table of `_EnablingBits`: fields, weights, clipping bounds, rows of words."""
+
+
+class _EnablingBits:
+    """Enabling as bit sets: a marking's enabled transitions are one ``uint64`` per 64
+    transitions, the AND of a few table rows, where the ``(T, n)`` boolean matrix of
+    `_Explorer.enabled` costs a gather and a test per arc and several passes over
+    ``T`` bytes per marking afterwards.
+
+    Each transition's preset tests fields (``field == low`` for a one-hot place,
+    ``field >= low`` for a count). Per field, only the values up to its largest ``low``
+    plus one "above all" class matter (counts are clipped to it), so the tested fields
+    are grouped, in order, into tables of at most `BIT_TABLE_ROWS` combinations of
+    their values: row ``sum(value_f * weight_f)`` holds the transitions whose arcs on
+    the group's fields all pass. A marking ANDs one row per table. The sleep sets
+    (`SleepSets`, same bit layout when every transition is tracked), the self-loops and
+    the fired sets are then word operations, and the fired edges come out of the bits
+    in (source, transition) order, as the next layer's sleep sets need them.
+
+    Attributes:
+        words: ``uint64`` words per marking.
+        tables: per group, ``(fields, weights, clip, rows)``: the group's fields, their
+            weights in the row number, per field the value larger ones are clipped to
+            (``-1``: a one-hot field, whose values all have a row) and the
+            ``(combinations, words)`` table.
+        feasible: whether the tables were built (see `BIT_TABLES_MIN`).
+    """
+
+    def __init__(self, fnet: FieldNet, n_t: int) -> None:
+        self.n_t = n_t
+        self.words = max(1, -(-n_t // 64))
+        top = np.zeros(fnet.n_fields, dtype=np.int64)  # largest ``low`` tested, per field
+        tested = np.zeros(fnet.n_fields, dtype=bool)
+        for g in fnet.groups:
+            if g.fields.size:
+                np.maximum.at(top, g.fields.reshape(-1), g.low.reshape(-1))
+                tested[g.fields.reshape(-1)] = True
+        sizes = top + 2  # values 0 .. top, and "above top"
+        # one-hot fields hold fewer values than that often: no clipping needed then
+        values = np.diff(np.append(fnet.offsets, fnet.n_seen))
+        bounded = fnet.onehot & (values <= sizes)
+        sizes[bounded] = values[bounded]
+        self.tables: list[_BitTable] = []
+        self.clips: list[npt.NDArray[np.integer] | None] = []
+        fields = np.flatnonzero(tested)
+        groups: list[list[int]] = []
+        rows = BIT_TABLE_ROWS + 1
+        for f in fields.tolist():
+            if rows * int(sizes[f]) > BIT_TABLE_ROWS:
+                groups.append([])
+                rows = 1
+            groups[-1].append(f)
+            rows *= int(sizes[f])
+        # a table per field of more values than a table holds: not worth it; nor are
+        # more tables than a marking's dense test costs (about a pass per transition)
+        self.feasible = bool((sizes[tested] <= BIT_TABLE_ROWS).all()) and len(groups) <= max(
+            BIT_TABLES_MIN, n_t // BIT_TABLE_TRANSITIONS
+        )
+        if not self.feasible:
+            return
+        passes = self._passes(fnet, n_t, sizes)
+        for group in groups:
+            table = np.ones((1, n_t), dtype=bool)
+            weights = []
+            for f in group:
+                weights.append(table.shape[0])
+                table = (passes[f][:, None, :] & table[None, :, :]).reshape(-1, n_t)
+            clip = [-1 if bounded[f] else int(sizes[f]) - 1 for f in group]
+            self.tables.append(
+                (
+                    np.asarray(group, dtype=np.int64),
+                    [np.int32(w) for w in weights],
+                    clip,
+                    self.pack(table),
+                )
+            )
+        never = np.ones((1, n_t), dtype=bool)
+        never[0, fnet.never] = False
+        self.always = self.pack(never)[0]  # transitions that can be enabled at all
+
+    @staticmethod
+    def _passes(
+        fnet: FieldNet, n_t: int, sizes: npt.NDArray[np.int64]
+    ) -> dict[int, npt.NDArray[np.bool_]]:
+        """Per tested field, ``(sizes[f], T)``: which transitions' arcs on it pass at
+        each value (those without an arc on it always pass)."""
+        passes: dict[int, npt.NDArray[np.bool_]] = {}
+        for g in fnet.groups:
+            for k in range(g.fields.shape[1]):
+                for f in np.unique(g.fields[:, k]).tolist():
+                    sel = np.flatnonzero(g.fields[:, k] == f)
+                    table = passes.setdefault(f, np.ones((int(sizes[f]), n_t), dtype=bool))
+                    v = np.arange(int(sizes[f]))[:, None]
+                    low, exact = g.low[sel, k][None, :], g.exact[sel, k][None, :]
+                    table[:, g.transitions[sel]] &= np.where(exact, v == low, v >= low)
+        return passes
+
+    def pack(self, matrix: npt.NDArray[np.bool_]) -> npt.NDArray[np.uint64]:
+        """Rows of booleans per transition as rows of ``words`` little-endian bit words."""
+        padded = np.zeros((matrix.shape[0], 64 * self.words), dtype=bool)
+        padded[:, : matrix.shape[1]] = matrix
+        packed = np.packbits(padded, axis=1, bitorder="little")
+        return np.ascontiguousarray(packed).view("<u8").astype(np.uint64)
+
+    def fit(self, dtype: np.dtype[np.integer]) -> None:
+        """The clipping bounds in the row dtype (it changes when fields widen)."""
+        top = int(np.iinfo(dtype).max)
+        self.clips = [
+            None
+            if all(c < 0 or c >= top for c in clip)
+            else np.asarray([top if c < 0 else min(c, top) for c in clip], dtype=dtype)[:, None]
+            for _, _, clip, _ in self.tables
+        ]
+
+    def enabled(self, cols: npt.NDArray[np.integer]) -> npt.NDArray[np.uint64]:
+        """``(n, words)``: the transitions each column enables, as bits."""
+        out: npt.NDArray[np.uint64] | None = None
+        for (fields, weights, _, table), clip in zip(self.tables, self.clips, strict=True):
+            values = cols.take(fields, axis=0)
+            if clip is not None:
+                np.minimum(values, clip, out=values)
+            # (a row per field in 32 bits: 4x faster than a sum over a 64-bit matrix)
+            row = values[0].astype(np.int32) * weights[0]
+            for k in range(1, len(weights)):
+                row += values[k] * weights[k]
+            rows = table.take(row, axis=0)
+            if out is None:
+                out = rows
+            else:
+                out &= rows
+        if out is None:
+            return np.repeat(self.always[None, :], cols.shape[1], axis=0)
+        out &= self.always
+        return out
+
+    def edges(self, bits: npt.NDArray[np.uint64]) -> Edges:
+        """The (transition, column) pairs of the set bits, in (column, transition)
+        order. Only the non-zero bytes are unpacked (Dekker: 9 of 32 per marking)."""
+        flat = bits.astype("<u8", copy=False).view(np.uint8).reshape(-1)
+        at = np.flatnonzero(flat != 0)
+        set_bits = np.unpackbits(flat.take(at), bitorder="little").view(bool)
+        within = np.flatnonzero(set_bits)
+        pos = at.take(within >> 3) << 3
+        pos |= within & 7  # bit number in the block, column-major
+        width = 64 * self.words
+        if width & (width - 1) == 0:
+            return pos & (width - 1), pos >> (width.bit_length() - 1)
+        src = pos // width
+        return pos - src * width, src
+
+    def transitions(self, bits: npt.NDArray[np.uint64]) -> npt.NDArray[np.bool_]:
+        """Per transition, whether its bit is set in ``bits`` (``words``)."""
+        per_byte = bits.astype("<u8", copy=False).view(np.uint8)
+        unpacked: npt.NDArray[np.bool_] = np.unpackbits(per_byte, bitorder="little").view(bool)
+        return unpacked[: self.n_t]
+
+
 class _Explorer:
     """The mutable state of one exploration; `explore` is its only user.
 
@@ -879,6 +1049,16 @@ class _Explorer:
         layout = Layout.initial_guess(cn, one_hot_components(cn, budget), bounds)
         self.fnet = fnet = FieldNet(cn, layout)
         self.index = _EnablingIndex(fnet, layout, cn.n_transitions)
+        self.bits: _EnablingBits | None = None
+        self.bit_fired = 0  # edges listed by `bit_edges`, and the markings it expanded
+        self.bit_sources = 0
+        if not self.index.looked_up and cn.n_transitions <= 64 * SLEEP_WORDS:
+            bits = _EnablingBits(fnet, cn.n_transitions)
+            if bits.feasible:
+                self.bits = bits
+                loops = np.zeros((1, cn.n_transitions), dtype=bool)
+                loops[0, cn.self_loops] = True
+                self.not_loops = ~bits.pack(loops)[0]
         # transitions tested in every marking of a narrow level (the others by lookup)
         self.tested = max(1, self.index.dense.size) if self.index.looked_up else cn.n_transitions
         inc_t, inc_col = np.nonzero(fnet.inc_fields >= 0)
@@ -906,6 +1086,9 @@ class _Explorer:
         self.seen = np.zeros(fnet.n_seen, dtype=bool)  # (component, value) pairs met
         self.seen[fnet.offsets[self.onehot_fields] + fnet.initial[self.onehot_fields]] = True
         self.partial_fields = np.flatnonzero(fnet.partial)
+        sizes = np.diff(np.append(fnet.offsets, fnet.n_seen))
+        self.onehot_sizes = sizes[self.onehot_fields]
+        self.unseen_fields = self.onehot_fields  # components with values not yet met
         self.tokens_exact = int(np.count_nonzero(fnet.exact))  # one token in each
         self.max_marking = int(cn.initial.sum())
         # States ``0 .. recorded - 1`` are in the bounds (`record`); the others were
@@ -938,6 +1121,8 @@ class _Explorer:
             dense = fnet.effects.dense(fnet.n_fields)
             self.col_delta = np.ascontiguousarray(dense.T.astype(self.dtype))
         self.tests = [self._tests(g) for g in fnet.groups]
+        if self.bits is not None:
+            self.bits.fit(self.dtype)
         self.dense_tests = [self._tests(g) for g in self.index.groups]
         top = np.iinfo(self.dtype).max
         self.rest_low = self.index.rest_low.astype(self.dtype)
@@ -1227,14 +1412,21 @@ class _Explorer:
             total = int(counts.sum(axis=0, dtype=np.int64).max())
         else:
             total = 0
-        if self.partial_fields.size and new.shape[1]:  # those components may be empty
+        # components that may be empty, unless every one held a token in some marking
+        # already (and there are no counts): then no marking holds more
+        most = self.tokens_exact + self.partial_fields.size
+        if self.partial_fields.size and new.shape[1] and (counts.size or self.max_marking < most):
             held = new.take(self.partial_fields, axis=0) != 0
             total = int((counts.sum(axis=0, dtype=np.int64) + held.sum(axis=0)).max())
         self.max_marking = max(self.max_marking, self.tokens_exact + total)
-        if self.onehot_fields.size and new.shape[1]:
-            values = new.take(self.onehot_fields, axis=0).astype(np.int64)
-            values += self.fnet.offsets[self.onehot_fields][:, None]
+        if self.unseen_fields.size and new.shape[1]:
+            values = new.take(self.unseen_fields, axis=0).astype(np.int64)
+            values += self.fnet.offsets[self.unseen_fields][:, None]
             self.seen[values.reshape(-1)] = True
+            # components whose every value was met need no more looking at (Dekker: all
+            # of them after the first layers)
+            met = np.add.reduceat(self.seen, self.fnet.offsets[self.onehot_fields])
+            self.unseen_fields = self.onehot_fields[met < self.onehot_sizes]
 
     def insert(
         self,
@@ -1297,6 +1489,8 @@ class _Explorer:
         sleep sets and the self-loops are applied to the matrix, and only the edges
         fired are listed (on Dekker a quarter of the enabled ones). When the next layer
         gets sleep sets, also the transitions each column fired (`SleepSets.fired_sets`)."""
+        if self.bits is not None:
+            return self.bit_edges(self.bits, cols, sleep)
         matrix = self.enabled(cols)
         self.fired |= matrix.any(axis=1)
         n_t = self.cn.n_transitions
@@ -1318,6 +1512,27 @@ class _Explorer:
         if sleep_sets is not None and 4 * trans.size * sleep_sets.words >= matrix.size:
             sets = sleep_sets.fired_sets(matrix)
         return counts, (trans, src), sets
+
+    def bit_edges(
+        self,
+        bits: _EnablingBits,
+        cols: npt.NDArray[np.integer],
+        sleep: npt.NDArray[np.uint64] | None,
+    ) -> tuple[npt.NDArray[np.int64], Edges, npt.NDArray[np.uint64] | None]:
+        """`matrix_edges` with enabling as bit sets (`_EnablingBits`): the sleep sets
+        and self-loops are masks of words, the fired edges come out in (source,
+        transition) order without a sort, and the fired sets are the fired bits."""
+        enabled = bits.enabled(cols)
+        counts = np.bitwise_count(enabled).sum(axis=1, dtype=np.int64)
+        self.fired |= bits.transitions(np.bitwise_or.reduce(enabled, axis=0))
+        if sleep is not None and self.sleep is not None:
+            enabled &= ~sleep
+        if self.self_loops.size:
+            enabled &= self.not_loops
+        edges = bits.edges(enabled)
+        self.bit_fired += edges[0].size
+        self.bit_sources += cols.shape[1]
+        return counts, edges, enabled if self.sleep_next else None
 
     def step(
         self,
@@ -1410,13 +1625,16 @@ class _Explorer:
         if self.repeat_table.size < 1 << bits:
             self.repeat_table = np.empty(1 << bits, dtype=np.int32)
         flat = keys.reshape(-1)
-        slot = flat * np.uint64(0x9E3779B97F4A7C15)
-        slot >>= np.uint64(64 - bits)
-        # written backwards: the last write, the first key of each slot, stays
-        self.repeat_table[slot[::-1]] = np.arange(m - 1, -1, -1, dtype=np.int32)
-        winner = self.repeat_table.take(slot)
-        repeat = flat.take(winner) == flat
-        repeat &= winner != np.arange(m, dtype=np.int32)  # (m < 2**31: a step's edges)
+        # hashed backwards: the last write to a slot, the first key there, stays (and a
+        # contiguous signed index is written three times faster than a uint64 one)
+        backwards = flat[::-1] * np.uint64(0x9E3779B97F4A7C15)
+        backwards >>= np.uint64(64 - bits)
+        slot = backwards.view(np.int64)  # (below 2**bits)
+        self.repeat_table[slot] = np.arange(m - 1, -1, -1, dtype=np.int32)
+        winner = self.repeat_table.take(slot[::-1])
+        # (m < 2**31: a step's edges; ``<``: only an earlier copy makes a repeat)
+        repeat = winner < np.arange(m, dtype=np.int32)
+        repeat &= flat.take(winner) == flat
         return np.flatnonzero(~repeat)
 
     def reduced_step(
@@ -1699,6 +1917,11 @@ class _Explorer:
         by_edges = int(min(EDGES_PER_STEP, STEP_BYTES // self.edge_bytes) / max(per_state, 1.0))
         tested = self.tested if self.reducer is None else self.cn.n_transitions
         by_matrix = CELLS_PER_STEP // max(1, tested)  # lookups build no (T, n) matrix
+        if self.bits is not None and self.reducer is None and self.bit_fired:
+            # steps with enabling as bit sets (`bit_edges`) list only the edges they
+            # fire: as many of those (Dekker fires 14 of 60 enabled per marking)
+            fired = max(self.bit_fired / self.bit_sources, 1.0)
+            by_edges = int(by_edges * max(per_state, 1.0) / fired)
         size = max(min(256, self.chunk), min(self.chunk, by_edges, by_matrix))
         if self.reducer is not None and self.choice_markings < POR_SAMPLE:
             # Small steps until the reduction is judged, so it is judged on the sample.

@@ -388,6 +388,20 @@ MODES: dict[str, dict[str, float]] = {
     },
     # narrow rounds dropping the repeats of every growing level
     "narrow, repeats dropped": {"NARROW_WIDTH": 1 << 30, "REPEATS_MIN": 0},
+    # the whole (T, n) enabled matrix instead of bit sets (`_EnablingBits`)
+    "wide, dense enabling": {
+        "NARROW_WIDTH": 0,
+        "SLEEP_MIN_DEGREE": 0.0,
+        "BIT_TABLES_MIN": 0,
+        "BIT_TABLE_TRANSITIONS": 1 << 30,
+    },
+    # bit sets from tables of a few rows: a table per field or two, counts clipped
+    "wide, small bit tables": {
+        "NARROW_WIDTH": 0,
+        "SLEEP_MIN_DEGREE": 0.0,
+        "BIT_TABLE_ROWS": 6,
+        "BIT_TABLES_MIN": 1 << 30,
+    },
 }
 
 
@@ -646,3 +660,27 @@ def test_a_wide_net_of_counts_explores_at_the_cost_of_what_it_marks() -> None:
     assert space.edges == 2 * per_ring * ways
     far = space.find(lambda m: (m[:, 39] == 2) & (m[:, 79] == 2))  # both rings' last place
     assert far is not None and len(space.trace_to(far)) == 4 * 39
+
+
+@settings(max_examples=60, deadline=None)
+@given(small_nets(max_places=7, max_transitions=9, max_weight=3, max_initial=3), st.booleans())
+def test_enabling_as_bit_sets_is_the_dense_enabled_matrix(net: Net, small: bool) -> None:
+    """`_EnablingBits` on every reachable marking (with tables of a few rows, or the
+    default): the same transitions as the dense test, listed in (marking, transition)
+    order."""
+    space = explore(net, max_states=2000)
+    with mock.patch.object(statespace, "BIT_TABLE_ROWS", 6 if small else 1 << 12):
+        explorer = statespace._Explorer(
+            CompactNet.from_net(net), None, Budget(), None, None, 1 << 15
+        )
+        bits = statespace._EnablingBits(explorer.fnet, len(net.transitions))
+    if not bits.feasible:  # (a count tested at more values than a table holds)
+        return
+    bits.fit(explorer.dtype)
+    rows = encoding.FieldNet.values(space.markings, explorer.layout)
+    rows = rows[(rows <= np.iinfo(explorer.dtype).max).all(axis=1)]  # (before any widening)
+    cols = np.ascontiguousarray(rows.T).astype(explorer.dtype)
+    dense = explorer.enabled(cols)
+    trans, src = bits.edges(bits.enabled(cols))
+    expected_src, expected_trans = np.nonzero(dense.T)
+    assert np.array_equal(src, expected_src) and np.array_equal(trans, expected_trans)
