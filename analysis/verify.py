@@ -360,6 +360,7 @@ class _Checker:
             and self.cover.bounded is not False
             and (options.max_states is None or options.max_states >= AUTO_SYMBOLIC_MIN_STATES)
             and symbolic_applicable(net)
+            and not self.budget.expired()  # (a search stopped by the time limit left none)
         ):
             self.symbolic = self._symbolic(AUTO_SYMBOLIC_SHARE)
 
