@@ -8,11 +8,24 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from coral_lang.net import Net
+from coral_lang.net import Net, Transition
 
 FORCE_WORK = 400_000
 """Most hyperedge entries `force` visits over all its rounds (every conformance net
 keeps its 40 rounds)."""
+
+
+def arc_weights(net: Net, tr: Transition) -> tuple[dict[int, int], dict[int, int]]:
+    """A transition's input and output weights by place number (parallel arcs add up)."""
+    pre: dict[int, int] = {}
+    post: dict[int, int] = {}
+    for name, w in tr.inputs:
+        p = net.place_index(name)
+        pre[p] = pre.get(p, 0) + w
+    for name, w in tr.outputs:
+        p = net.place_index(name)
+        post[p] = post.get(p, 0) + w
+    return pre, post
 
 
 def span_sum(net: Net, order: Sequence[int]) -> int:

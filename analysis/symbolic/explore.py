@@ -27,6 +27,7 @@ import dd.cudd as cudd
 from analysis.budget import Budget, memory_limit_reason, resident_bytes
 from analysis.symbolic.encoding import (
     Encoding,
+    arc_weights,
     initial_bits,
     invariant_facts,
     level_order,
@@ -192,16 +193,10 @@ class SymbolicNet:
         self.bdd.declare(*self.enc.declaration())
         self.level_of_place = {p: i for i, p in enumerate(self.enc.order)}
         self.xvars = [v for p in self.enc.order for v in self.enc.xs(p)]
-        index = {p.name: i for i, p in enumerate(net.places)}
         self.initial = self.marking_cube([p.initial for p in net.places], current=True)
         self.transitions: list[_Transition] = []
         for tr in net.transitions:
-            pre: dict[int, int] = {}
-            post: dict[int, int] = {}
-            for name, w in tr.inputs:
-                pre[index[name]] = pre.get(index[name], 0) + w
-            for name, w in tr.outputs:
-                post[index[name]] = post.get(index[name], 0) + w
+            pre, post = arc_weights(net, tr)
             self.transitions.append(self._transition(tr.name, pre, post))
             if deadline is not None:
                 deadline.check()  # a wide net's relations take a while to build

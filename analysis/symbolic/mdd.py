@@ -30,6 +30,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from analysis.symbolic.encoding import arc_weights
 from coral_lang.net import Net
 
 EMPTY = 0
@@ -117,18 +118,12 @@ class MddSaturation:
         self.units = [list(places) for places in levels]
         self.levels = len(self.units)
         self.check = check
-        index = {p.name: i for i, p in enumerate(net.places)}
         self.caps = [caps[u[0]] if len(u) == 1 else len(u) - 1 for u in self.units]
         self.by_top: list[list[_Event]] = [[] for _ in range(self.levels)]
         self.always_enabled = False
         level_of = {p: k for k, u in enumerate(self.units) for p in u}
         for number, tr in enumerate(net.transitions):
-            pre: dict[int, int] = {}
-            post: dict[int, int] = {}
-            for name, w in tr.inputs:
-                pre[index[name]] = pre.get(index[name], 0) + w
-            for name, w in tr.outputs:
-                post[index[name]] = post.get(index[name], 0) + w
+            pre, post = arc_weights(net, tr)
             touched = sorted({level_of[p] for p in (*pre, *post)})
             steps = _steps(pre, post, [self.units[k] for k in touched])
             if steps is None:
