@@ -1045,8 +1045,11 @@ class _Explorer:
         small = max_states is not None and max_states < np.iinfo(np.int32).max // 2
         self.index_type = np.int32 if small else np.int64
         self.via_type = _via_type(cn.n_transitions)
-        bounds = invariant_place_bounds(cn, budget)
-        layout = Layout.initial_guess(cn, one_hot_components(cn, budget), bounds)
+        components = one_hot_components(cn, budget)
+        covered = sum(int(c.places.size) for c in components)
+        # (the bounds only size count fields: none when components take every place)
+        bounds = invariant_place_bounds(cn, budget) if covered < cn.n_places else None
+        layout = Layout.initial_guess(cn, components, bounds)
         self.fnet = fnet = FieldNet(cn, layout)
         self.index = _EnablingIndex(fnet, layout, cn.n_transitions)
         self.bits: _EnablingBits | None = None
