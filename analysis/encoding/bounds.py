@@ -15,7 +15,7 @@ import numpy as np
 
 from analysis.budget import Budget
 from analysis.encoding.compact import CompactNet, IntArray
-from analysis.invariants import p_invariants
+from analysis.invariants import invariant_bounds, p_invariants
 
 BOUNDS_SECONDS = 0.25
 """Time slice of the invariant search; the invariants found by then still bound."""
@@ -41,14 +41,7 @@ def invariant_place_bounds(cn: CompactNet, budget: Budget | None = None) -> IntA
         return out
     search = (budget or Budget()).child(seconds=BOUNDS_SECONDS)
     basis = p_invariants(cn.net, max_rows=BOUNDS_ROWS, budget=search)
-    initial = [int(v) for v in cn.initial]
-    best: dict[int, int] = {}
-    for inv in basis.invariants:
-        total = inv.value(initial)
-        for p, weight in enumerate(inv.weights):
-            if weight:
-                best[p] = min(total // weight, best.get(p, total // weight))
-    for p, bound in best.items():
-        out[p] = min(bound, np.iinfo(np.int64).max)
+    for name, bound in invariant_bounds(cn.net, basis).items():
+        out[cn.net.place_index(name)] = min(bound, np.iinfo(np.int64).max)
     cn.__dict__[_CACHE] = out.copy()  # as `functools.cached_property` does
     return out

@@ -200,7 +200,7 @@ class Layout:
         for f, onehot in enumerate(self.onehot):
             if not onehot:
                 need = _count_bits(int(reached[f]))
-                out[f] = min(self.caps[f], need + 1) if need < self.caps[f] else need
+                out[f] = need + 1 if need < self.caps[f] else need
         return out
 
     def _rebuilt(self, bits: Sequence[int]) -> Layout:
