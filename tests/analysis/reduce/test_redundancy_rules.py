@@ -18,9 +18,8 @@ from analysis.reduce.work import WorkNet
 from analysis.statespace import explore
 from coral_lang.net import Net, Place, Transition
 from tests.analysis.reduce.test_preservation import (
-    _complete,
-    _observed,
     assert_deadlock_preserved,
+    assert_same_observations,
 )
 from tests.analysis.strategies import small_nets
 
@@ -112,11 +111,7 @@ def test_reachable_observations_and_bounds_are_the_same(
     """Equal sets of reachable (observed values, observed enabledness): every predicate
     and every bound over them answers alike; bounds are also checked with their own goal."""
     net, places, transitions = case
-    original = _complete(net)
-    red = reduce_net(net, Goal.reachability(places, transitions))
-    reduced = explore(red.net, max_states=None)
-    assert reduced.complete
-    assert _observed(reduced, places, transitions) == _observed(original, places, transitions)
+    original = assert_same_observations(net, places, transitions)
     if places:
         bounded = explore(reduce_net(net, Goal.bounds(places)).net, max_states=None)
         want = original.max_sum([net.place_index(p) for p in places])
