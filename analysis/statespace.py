@@ -44,7 +44,12 @@ Memory per stored state: the bytes of a one-word key its fields reach
 (``Layout.word_bytes``: 4 of Referendum-PT-0015's 30 bits, 5 of Peterson-PT-3's 34;
 ``8 * W`` for keys of ``W > 1`` words, see `_stored_bytes`), 1 or 2
 bytes of transition, and 6.7 to 10 bytes of hash table (a 4-byte state number per slot,
-load 0.4 to 0.6, see `KeyStore`): about 12 to 20 bytes for one-word nets.
+load 0.4 to 0.6, see `KeyStore`): about 12 to 20 bytes for one-word nets. What else is
+resident while the search runs, and what bounds it: the sleep sets of the layer being
+expanded and of the next one (only their nonzero words, in maps of their own that are
+unmapped as they are read: `analysis.spool`), one step's temporaries
+(`BLOCK_TEMPORARY_BYTES`), and what the C heap keeps free, which is given back between
+wide layers and before the table grows (`analysis.allocator.release_free_heap`).
 
 Typical use::
 
@@ -56,16 +61,14 @@ Typical use::
 
 from __future__ import annotations
 
-import ctypes
 import sys
-from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
-from typing import cast
 
 import numpy as np
 import numpy.typing as npt
 
+from analysis.allocator import heap_free_bytes, release_free_heap, settle_allocator
 from analysis.budget import (
     Budget,
     BudgetExceeded,
@@ -91,6 +94,7 @@ from analysis.encoding import (
 )
 from analysis.inputs import has_inputs, input_edges_at, legal_trace, terminal_rows
 from analysis.progress import ProgressCallback, ProgressInfo
+from analysis.spool import RowSpool
 from analysis.stubborn import StubbornSets
 from coral_lang.net import Net
 
@@ -107,6 +111,17 @@ STEP_BYTES = 64 << 20
 """Most bytes of successor keys (and, in a narrow round, columns) one vectorised step
 builds: `EDGES_PER_STEP` assumes keys of a word or two, while a net of 10,000 places of
 2-bit counts has keys of 320 words, where that many edges would take gigabytes."""
+
+BLOCK_TEMPORARY_BYTES = 8 << 20
+"""Most bytes of temporaries a step is sized for (`_Explorer.block_size`, by
+`state_bytes` and `edge_bytes`). They are freed after the step, but the largest step
+sets the heap's high-water mark for the whole layer on top of the store and the sleep
+sets: on SharedMemory-PT-000010 (4 words of sleep sets, 3 edges fired per marking)
+blocks of `DEFAULT_CHUNK` markings took 15 MB, 8 resident bytes per stored state."""
+
+TRIM_LAYER = 1 << 16
+"""Layers of at least this many states end by giving the C heap's free pages back
+(`analysis.allocator.release_free_heap`)."""
 
 CELLS_PER_STEP = 1 << 23
 """Most (transition, marking) cells of one step's enabled matrix (8 MB of booleans)."""
@@ -541,31 +556,6 @@ class SleepSets:
             out |= sleep.take(rep_s, axis=0)
         out &= self.independent.take(rep_t, axis=0)
         return out
-
-
-class _RowQueue:
-    """Rows of a list of arrays read front to back, ``take(n)`` at a time; an array is
-    forgotten once its last row is read, so its memory goes back to the allocator
-    while the reader is still busy with the others."""
-
-    def __init__(self, pieces: list[npt.NDArray[np.uint64]]) -> None:
-        self._pieces = deque(pieces)
-        self._offset = 0  # rows of the first piece already read
-
-    def take(self, n: int) -> npt.NDArray[np.uint64]:
-        """The next ``n`` rows (fewer only when none are left)."""
-        parts: list[npt.NDArray[np.uint64]] = []
-        while n > 0 and self._pieces:
-            piece = self._pieces[0]
-            rows = min(n, piece.shape[0] - self._offset)
-            parts.append(piece[self._offset : self._offset + rows])
-            self._offset += rows
-            n -= rows
-            if self._offset == piece.shape[0]:
-                self._pieces.popleft()
-                self._offset = 0
-        assert parts, "a layer's sleep sets cover its states"
-        return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
 class _Round:
@@ -1105,7 +1095,7 @@ class _Explorer:
         wanted = sleep_sets and reducer is None and cn.n_transitions > 1
         self.sleep = SleepSets(cn) if wanted else None
         self.sleep_next = False  # whether this layer computes the next one's sleep sets
-        self.next_sleep: list[npt.NDArray[np.uint64]] = []
+        self.next_sleep: RowSpool | None = None  # the next layer's, while sleep_next
         self.choice_markings = 0  # POR: markings with a choice seen, firings kept of them
         self.choice_enabled = 0
         self.choice_fired = 0
@@ -1586,7 +1576,8 @@ class _Explorer:
             offered = fired[0].take(kept), fired[1].take(kept)
             added = self.insert(cols, base, offered, keys.take(kept, axis=0))
             first = kept.take(added.first)
-        if self.sleep_next and self.sleep is not None and first.size:
+        keys = kept = None  # (freed before the sleep sets' temporaries)
+        if self.next_sleep is not None and self.sleep is not None and first.size:
             self.next_sleep.append(self.sleep.successors(sleep, fired, first, sets))
         return cols
 
@@ -1719,7 +1710,7 @@ class _Explorer:
         # A layer is the states ``base ...`` up to the store's end (they are numbered in
         # BFS order), unpacked from their keys a block at a time: no layer is kept as
         # columns, which on wide layers cost more than the store's own bytes per state.
-        sleeps: list[npt.NDArray[np.uint64]] | None = None
+        sleeps: RowSpool | None = None
         base = 0
         while base < self.store.size:
             width = self.store.size - base
@@ -1729,13 +1720,15 @@ class _Explorer:
                     base = done[1]
                     sleeps = None
                     continue
-            self.next_sleep = []
             self.sleep_next = self.sleep is not None and self.edges >= SLEEP_MIN_DEGREE * base
-            # Each block takes its sleep sets off the front of the layer's pieces, which
-            # are dropped as they are used up: a wide layer's sleep sets (8 bytes per
-            # tracked 64 transitions per state) are never held twice, and they shrink
-            # as the next layer's grow.
-            sleep_all = None if not sleeps else _RowQueue(sleeps)
+            # Each block takes its sleep sets off the front of the layer's spool, which
+            # unmaps its pages as they are read: a wide layer's sleep sets (8 bytes per
+            # tracked 64 transitions per state) are never held twice, they shrink as the
+            # next layer's grow, and they never fragment the heap (`analysis.spool`).
+            self.next_sleep = (
+                RowSpool(self.sleep.words) if self.sleep is not None and self.sleep_next else None
+            )
+            sleep_all = sleeps
             sleeps = None
             c = 0
             while c < width:
@@ -1749,7 +1742,9 @@ class _Explorer:
                 c += size
                 self.check_time(self.store.size - base - c)
             base += width
-            sleeps = self.next_sleep if self.sleep_next else None
+            sleeps, self.next_sleep = self.next_sleep, None
+            if width >= TRIM_LAYER:
+                release_free_heap()
             if base < self.store.size:
                 self.layer_starts.append(base)
 
@@ -1925,11 +1920,27 @@ class _Explorer:
             # fire: as many of those (Dekker fires 14 of 60 enabled per marking)
             fired = max(self.bit_fired / self.bit_sources, 1.0)
             by_edges = int(by_edges * max(per_state, 1.0) / fired)
-        size = max(min(256, self.chunk), min(self.chunk, by_edges, by_matrix))
+        else:
+            fired = per_state
+        by_bytes = BLOCK_TEMPORARY_BYTES // (self.state_bytes + int(fired * self.edge_bytes))
+        size = max(min(256, self.chunk), min(self.chunk, by_edges, by_matrix, by_bytes))
         if self.reducer is not None and self.choice_markings < POR_SAMPLE:
             # Small steps until the reduction is judged, so it is judged on the sample.
             size = min(size, max(256, POR_SAMPLE - self.choice_markings))
         return size
+
+    @property
+    def state_bytes(self) -> int:
+        """Bytes of temporaries per marking of a step: its columns, its parent's key,
+        and a few rows of sleep words (the part taken from the spool, the enabled or
+        fired bits, the new states' sets)."""
+        sleep_words = 0 if self.sleep is None else self.sleep.words
+        return (
+            self.fnet.n_fields * self.dtype.itemsize
+            + 8 * self.layout.n_words
+            + 24 * sleep_words
+            + 32
+        )
 
     @property
     def edge_bytes(self) -> int:
@@ -2061,65 +2072,6 @@ def _group_matrix(
             ok &= _test(cols.take(group.fields[:, k], axis=0), checks[k])
         out[group.transitions] = ok
     return out
-
-
-class _MallInfo2(ctypes.Structure):
-    """glibc's ``struct mallinfo2`` (all fields ``size_t``)."""
-
-    _fields_ = [
-        (name, ctypes.c_size_t)
-        for name in [
-            "arena",
-            "ordblks",
-            "smblks",
-            "hblks",
-            "hblkhd",
-            "usmblks",
-            "fsmblks",
-            "uordblks",
-            "fordblks",
-            "keepcost",
-        ]
-    ]
-
-
-def _mallinfo2() -> Callable[[], _MallInfo2] | None:
-    """glibc's ``mallinfo2`` (2.33 and later), or None elsewhere."""
-    try:
-        function = ctypes.CDLL(None).mallinfo2
-    except (AttributeError, OSError):
-        return None
-    function.restype = _MallInfo2
-    function.argtypes = []
-    return cast(Callable[[], _MallInfo2], function)
-
-
-_MALLINFO2 = _mallinfo2()
-
-
-def heap_free_bytes() -> int:
-    """Bytes the C allocator holds free (glibc: ``mallinfo2().fordblks``; 0 elsewhere).
-
-    glibc keeps freed blocks (see `_settle_allocator`), so after the first large step
-    much of the resident memory is free heap that the next step's temporaries reuse
-    without growing the process: a memory check counts an allocation only beyond it,
-    or it would stop a search long before its limit (by a factor of 5 on 2^21
-    toggles with 40 MiB to spare)."""
-    if _MALLINFO2 is None:
-        return 0
-    return int(_MALLINFO2().fordblks)
-
-
-def _settle_allocator() -> None:
-    """Allocate and free one 30 MB block, once per exploration.
-
-    glibc serves blocks above its *mmap threshold* (128 KB at start) with fresh pages
-    from the kernel and returns them on free; it raises the threshold (up to 32 MB) only
-    after such a block is freed. Until then every temporary of a vectorised step costs
-    page faults on every use, which on the reference machine is the price of writing
-    the memory many times over. Freeing one large block moves glibc to the steady state
-    it reaches by itself later (elsewhere this is just an allocation)."""
-    np.empty(30 << 20, dtype=np.uint8)
 
 
 def _largest(places: npt.NDArray[np.int64], reached: npt.NDArray[np.int64]) -> dict[int, int]:
@@ -2303,7 +2255,7 @@ def _explore(
     if por:
         vis = None if visible is None else [cn.net.place_index(p) for p in visible]
         reducer = StubbornSets(cn, vis)
-    _settle_allocator()
+    settle_allocator()
     explorer = _Explorer(cn, max_states, budget, reducer, progress, chunk, sleep_sets=sleep_sets)
     explorer.stop_when = stop_when
     try:

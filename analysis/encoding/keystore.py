@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from analysis.allocator import release_free_heap
 from analysis.encoding.compact import BoolArray, IntArray, KeyArray
 
 # -- hashing -----------------------------------------------------------------------------
@@ -43,6 +44,12 @@ FILL_CHUNK = 1 << 16
 rebuild comes when the store is near its largest, so its temporaries add to the peak:
 2^18 keys took 12-16 MB of them (FMS-PT-00005: 26.7 resident bytes per state against
 24.4 with 2^16, at the same speed; 2^14 was slower)."""
+
+TRIM_GROWTH_BYTES = 1 << 22
+"""A table growth touching this many new bytes first gives the C heap's free pages back
+(`analysis.allocator.release_free_heap`): growths come when the store is near its
+largest, so what the heap keeps free then adds to the search's peak (DoubleExponent-PT-003:
+10 MB, 4 resident bytes per state)."""
 
 PROBE_WINDOW_BELOW = 8192
 """Probe batches up to this size look at `_WINDOW` consecutive slots per round."""
@@ -672,6 +679,8 @@ class KeyStore:
         while need > load * slots:
             slots = self._grown(slots)
         if slots != self._slots:
+            if (slots - self._slots) * self._buffer.itemsize >= TRIM_GROWTH_BYTES:
+                release_free_heap()  # (the table's new pages come on top of the heap's)
             self._resize(slots)
 
     def _place(self, slots: IntArray, ids: IntArray) -> None:

@@ -1,0 +1,88 @@
+"""What the explorer does to keep its resident memory close to what it stores: steps
+sized in bytes (`BLOCK_TEMPORARY_BYTES`), sleep sets in a spool of their own, and the
+C heap's free pages given back between wide layers and before the table grows. None of
+it may change what is found."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import analysis.encoding.keystore as keystore
+import analysis.statespace as statespace
+from analysis.encoding import CompactNet
+from analysis.statespace import StateSpace, explore
+from coral_lang.pnml import read_pnml
+from tests.conftest import CONFORMANCE
+
+
+def _summary(space: StateSpace) -> tuple[object, ...]:
+    return (
+        space.states,
+        space.edges,
+        space.complete,
+        space.place_bounds.tolist(),
+        space.deadlocks.tolist(),
+        space.fired_transitions.tolist(),
+        space.layer_starts.tolist(),
+    )
+
+
+@pytest.fixture(scope="module")
+def philosophers() -> CompactNet:
+    # 59,049 states, 7.8 edges per marking, 1 word of sleep sets
+    return CompactNet.from_net(read_pnml(CONFORMANCE / "pnml" / "Philosophers-PT-000010.pnml"))
+
+
+def test_blocks_stay_within_their_byte_budget(
+    monkeypatch: pytest.MonkeyPatch, philosophers: CompactNet
+) -> None:
+    budget = 1 << 20
+    monkeypatch.setattr(statespace, "BLOCK_TEMPORARY_BYTES", budget)
+    seen: list[tuple[int, int]] = []
+    sized = statespace._Explorer.block_size
+
+    def recorded(self: statespace._Explorer) -> int:
+        size: int = sized(self)
+        fired = self.bit_fired / max(1, self.bit_sources) if self.bits is not None else 0.0
+        if self.bit_fired:
+            seen.append((size, self.state_bytes + int(max(fired, 1.0) * self.edge_bytes)))
+        return size
+
+    monkeypatch.setattr(statespace._Explorer, "block_size", recorded)
+    space = explore(philosophers, max_states=100_000)
+    assert space.complete and seen
+    assert all(size <= max(256, budget // per_state) for size, per_state in seen)
+    assert max(size for size, _ in seen) < statespace.DEFAULT_CHUNK  # the budget bound
+
+
+def test_small_blocks_find_the_same_space(
+    monkeypatch: pytest.MonkeyPatch, philosophers: CompactNet
+) -> None:
+    whole = explore(philosophers, max_states=100_000)
+    monkeypatch.setattr(statespace, "BLOCK_TEMPORARY_BYTES", 1)  # blocks of 256 markings
+    small = explore(philosophers, max_states=100_000)
+    assert _summary(small) == _summary(whole)
+    assert small.trace_to(small.states - 1) == whole.trace_to(whole.states - 1)
+
+
+def test_free_heap_is_given_back_between_wide_layers_and_before_the_table_grows(
+    monkeypatch: pytest.MonkeyPatch, philosophers: CompactNet
+) -> None:
+    calls = {"layer": 0, "table": 0}
+
+    def layer() -> None:
+        calls["layer"] += 1
+
+    def table() -> None:
+        calls["table"] += 1
+
+    monkeypatch.setattr(statespace, "TRIM_LAYER", 4096)
+    monkeypatch.setattr(statespace, "release_free_heap", layer)
+    monkeypatch.setattr(keystore, "TRIM_GROWTH_BYTES", 1 << 16)
+    monkeypatch.setattr(keystore, "release_free_heap", table)
+    space = explore(philosophers, max_states=100_000)
+    widths = np.diff(np.append(space.layer_starts, space.states))
+    wide = int(np.count_nonzero(widths >= 4096))
+    assert calls["layer"] == wide >= 1
+    assert calls["table"] >= 1
