@@ -147,7 +147,10 @@ class StateSpace:
         states: reachable markings found (all of them when ``complete``).
         edges: (marking, enabled transition) pairs fired; with ``por`` only the
             reduced ones.
-        place_bounds: most tokens each place held in any stored marking.
+        place_bounds: most tokens each place held in any stored marking whose bounds
+            were recorded: the first ``recorded`` states (all of them, unless a time
+            limit ran out with states stored but not expanded: those are recorded
+            only until `RECORD_GRACE` seconds past the deadline).
         max_tokens_place: ``max(place_bounds)``.
         max_tokens_marking: most tokens in one stored marking.
         deadlocks: numbers of all dead states found (no transition enabled; on a net
@@ -164,6 +167,8 @@ class StateSpace:
         reduced: whether partial-order reduction was on.
         reduction_note: with ``por``, why the reduction was switched off part-way
             (it pruned almost nothing on a sample of markings), else ``None``.
+        recorded: the states counted in ``place_bounds``, ``max_tokens_place`` and
+            ``max_tokens_marking`` (see ``place_bounds``; -1: all of them).
     """
 
     net: Net
@@ -187,6 +192,7 @@ class StateSpace:
     via: npt.NDArray[np.integer] = field(repr=False)
     layer_starts: npt.NDArray[np.int64] = field(repr=False)
     reduction_note: str | None = None
+    recorded: int = -1
 
     @property
     def bytes_per_state(self) -> float:
@@ -353,6 +359,10 @@ every marking costs less than the lookup (Referendum, 31 transitions: 40 % slowe
 INSERT_BYTES = 64
 """Bytes of temporaries per candidate while a batch is inserted (hashes, slots,
 positions, probe results), beside its key and its successor's column."""
+
+RECORD_GRACE = 0.1
+"""Seconds past a time limit (or from the end of a search stopped before it) that the
+bounds of states stored but not expanded are still recorded (`StateSpace.recorded`)."""
 
 RECORD_CELLS = 1 << 18
 """Most (marking, field) cells `_Explorer.record_pending` decodes at once (2 MB of
@@ -1758,13 +1768,16 @@ class _Explorer:
             self.recorded = start + n
         return cols
 
-    def record_pending(self, end: int | None = None) -> None:
+    def record_pending(self, end: int | None = None, until: float | None = None) -> None:
         """`record` the stored states from ``recorded`` up to ``end`` (default: all),
-        unpacked from their keys a block at a time."""
+        unpacked from their keys a block at a time; stop early once the budget's clock
+        passes ``until``."""
         end = self.store.size if end is None else end
         # small blocks: this also runs after a search stopped at its memory limit
         step = max(1, RECORD_CELLS // max(1, self.fnet.n_fields))
         while self.recorded < end:
+            if until is not None and self.budget.clock() > until:
+                return
             n = min(step, end - self.recorded)
             keys = self.store.keys[self.recorded : self.recorded + n]
             self.record(self.layout.fields(keys, self.dtype))
@@ -2264,8 +2277,13 @@ def _explore(
         pass
     except MemoryError:  # an allocation failed (memory limit or ceiling): say so, keep the rest
         explorer.stopped = memory_limit_reason(budget.memory, explorer.store.size)
+    # The bounds of the states stored but not expanded: on a net of 20,000 places the
+    # last step of a search stopped by its time limit can store 100,000 of them, 17 s
+    # of decoding (rings(2000, 10)); within the limit, or briefly past it.
+    deadline = budget.deadline
+    until = None if deadline is None else max(deadline, budget.clock()) + RECORD_GRACE
     try:
-        explorer.record_pending()  # the bounds of the states stored but not expanded
+        explorer.record_pending(until=until)
     except MemoryError:  # (a few MB at most, after a search that ran out of memory)
         explorer.stopped = memory_limit_reason(budget.memory, explorer.store.size)
     seconds = budget.clock() - explorer.start
@@ -2295,4 +2313,5 @@ def _explore(
         via=via,
         layer_starts=np.asarray(explorer.layer_starts, dtype=np.int64),
         reduction_note=explorer.reduction_note,
+        recorded=-1 if explorer.recorded >= store.size else explorer.recorded,
     )
