@@ -26,6 +26,12 @@ soon, large enough that mapping costs nothing measurable."""
 SPARSE_MAX_WORDS = 8
 """Widest rows kept sparse (the byte that marks a row's nonzero words has 8 bits)."""
 
+SPARSE_SHARE = 0.75
+"""Rows are kept sparse when fewer than this share of the words of the first rows
+appended are nonzero: below, the mark byte and the masked copies (about a tenth of
+a search's time on Peterson-PT-3) buy memory; above, they would buy little (Dekker-PT-015
+fills 3.85 of 4 words)."""
+
 
 class _Stream:
     """Values of one dtype, appended at the back and taken at the front, in maps of
@@ -79,13 +85,14 @@ class _Stream:
 
 class RowSpool:
     """Rows of ``width`` ``uint64`` words, appended at the back and taken at the front
-    (`take` returns new arrays: nothing read keeps a map alive)."""
+    (`take` returns new arrays: nothing read keeps a map alive). ``sparse`` says whether
+    only nonzero words are kept (None until the first rows, which decide it)."""
 
     def __init__(self, width: int) -> None:
         if width < 1:
             raise ValueError(f"rows need at least one word, not {width}")
         self.width = width
-        self.sparse = 2 <= width <= SPARSE_MAX_WORDS
+        self.sparse: bool | None = None if 2 <= width <= SPARSE_MAX_WORDS else False
         self._words = _Stream(np.uint64)
         self._marks = _Stream(np.uint8)  # sparse rows: bit k set when word k is nonzero
         self.size = 0  # rows appended and not yet taken
@@ -94,6 +101,8 @@ class RowSpool:
         """Add ``rows`` (shape ``(n, width)``) at the back; they are copied."""
         if rows.ndim != 2 or rows.shape[1] != self.width:
             raise ValueError(f"rows of width {self.width} expected, got shape {rows.shape}")
+        if self.sparse is None and rows.size:  # decided by the first rows
+            self.sparse = bool(np.count_nonzero(rows) < SPARSE_SHARE * rows.size)
         if self.sparse:
             nonzero = rows != 0
             self._marks.append(np.packbits(nonzero, axis=1, bitorder="little").reshape(-1))

@@ -83,6 +83,17 @@ def test_sparse_rows_keep_only_nonzero_words(monkeypatch: pytest.MonkeyPatch) ->
     assert np.array_equal(queue.take(4096), rows)
 
 
+def test_dense_rows_are_kept_whole() -> None:
+    queue = RowSpool(4)
+    rows = np.full((1000, 4), 7, dtype=np.uint64)
+    rows[::10, 0] = 0  # 97.5 % nonzero: the marks would cost more than they save
+    queue.append(rows)
+    assert queue.sparse is False
+    queue.append(np.zeros((10, 4), dtype=np.uint64))  # later rows follow the first ones
+    assert queue.sparse is False and queue.nbytes == rows.nbytes + 10 * 32
+    assert np.array_equal(queue.take(1000), rows)
+
+
 def test_bad_shapes_and_counts_are_refused() -> None:
     queue = RowSpool(2)
     with pytest.raises(ValueError, match="width 2"):
