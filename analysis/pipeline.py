@@ -137,7 +137,9 @@ def _load(file: str | Path, options: CheckOptions) -> tuple[str, CompileResult] 
     return str(file), result
 
 
-def check_file(file: str | Path, options: CheckOptions) -> FileOutcome:
+def check_file(
+    file: str | Path, options: CheckOptions, *, budget: Budget | None = None
+) -> FileOutcome:
     """Compile (or import) ``file``, verify it unless ``options.verify`` is None, lint it.
 
     Never raises for bad input: a file that cannot be read is an outcome with
@@ -145,9 +147,13 @@ def check_file(file: str | Path, options: CheckOptions) -> FileOutcome:
 
     The verification's time limit (``options.verify.time_limit``) is counted from here,
     before the file is read: reading a large PNML net takes seconds, and the limit
-    bounds the whole check of the file, not only the analysis after it.
+    bounds the whole check of the file, not only the analysis after it. ``budget``: the
+    caller's, started before (tests pass one on a fake clock); the time limit is then
+    a slice of it.
     """
-    budget = None if options.verify is None else Budget(options.verify.time_limit)
+    if options.verify is not None:
+        limit = options.verify.time_limit
+        budget = Budget(limit) if budget is None else budget.child(seconds=limit)
     loaded = _load(file, options)
     if isinstance(loaded, str):
         name = STDIN_NAME if str(file) == STDIN else str(file)
