@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from analysis.budget import Budget
 from analysis.lint import LintOptions, lint
 from analysis.outcome import FileOutcome, make_outcome
 from coral_lang.compiler import CompileResult, compile_source
@@ -136,12 +137,23 @@ def _load(file: str | Path, options: CheckOptions) -> tuple[str, CompileResult] 
     return str(file), result
 
 
-def check_file(file: str | Path, options: CheckOptions) -> FileOutcome:
+def check_file(
+    file: str | Path, options: CheckOptions, *, budget: Budget | None = None
+) -> FileOutcome:
     """Compile (or import) ``file``, verify it unless ``options.verify`` is None, lint it.
 
     Never raises for bad input: a file that cannot be read is an outcome with
     ``input_error`` set, a mission with errors an outcome with those diagnostics.
+
+    The verification's time limit (``options.verify.time_limit``) is counted from here,
+    before the file is read: reading a large PNML net takes seconds, and the limit
+    bounds the whole check of the file, not only the analysis after it. ``budget``: the
+    caller's, started before (tests pass one on a fake clock); the time limit is then
+    a slice of it.
     """
+    if options.verify is not None:
+        limit = options.verify.time_limit
+        budget = Budget(limit) if budget is None else budget.child(seconds=limit)
     loaded = _load(file, options)
     if isinstance(loaded, str):
         name = STDIN_NAME if str(file) == STDIN else str(file)
@@ -165,7 +177,7 @@ def check_file(file: str | Path, options: CheckOptions) -> FileOutcome:
     # Timed analysis takes work times from the profile the mission compiled against
     # (an imported PNML net has none).
     profiles = () if result.profile is None else (result.profile,)
-    verification = run_verification(result.net, options.verify, profiles=profiles)
+    verification = run_verification(result.net, options.verify, budget=budget, profiles=profiles)
     # One exploration serves both: lint's race rule reads the verifier's state space.
     findings = _selected(lint(result, options.lint, verification.space), options)
     return make_outcome(

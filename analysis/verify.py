@@ -30,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from analysis.budget import Budget, memory_limit_reason, peak_resident_bytes, resident_bytes
-from analysis.coverability import coverability
+from analysis.coverability import coverability, node_cap
 from analysis.inputs import has_inputs
 from analysis.progress import ProgressCallback
 from analysis.report import (
@@ -84,7 +84,10 @@ SEARCH_SHARE = 0.8  # of the command's time limit, for the explicit search; the 
 STRUCTURE_FACTS = ("invariants", "structural_boundedness", "siphons_traps")
 QUICK_COVERABILITY_NODES = 2_000
 QUICK_COVERABILITY_SECONDS = 1.0
+QUICK_COVERABILITY_SHARE = 0.1  # of the time left, at most, for the quick tree
+QUICK_COVERABILITY_CELLS = 2_000_000  # place values the quick tree may hold (node_cap)
 COVERABILITY_SECONDS = 10.0
+COVERABILITY_CELLS = 20_000_000  # place values the full tree may hold (320 MB)
 PAIR_SECONDS = 10.0  # each state-equation proof that two resources never meet
 UNBOUNDED_STATES = 20_000
 REALISE_NODES = 20_000  # firing orders tried to turn a state-equation solution into a trace
@@ -98,6 +101,11 @@ REDUCED_BY = {
 """The method of a deadlock verdict the reduced net decided without its search
 (`analysis.reduce.deadlock.DeadlockAnswer.by`)."""
 AUTO_SYMBOLIC_SHARE = 0.5  # of the time left, for decision diagrams after an explicit stop
+SYMBOLIC_SETUP_SECONDS_PER_ARC = 50e-6
+"""What setting up decision diagrams (invariants, variable order, relations) costs per
+arc and place before their budget is first read: 1.3-2.1 s on the 40,000 arcs of two
+generated wide nets. After an explicit stop the diagrams are not started when their
+share of the time left is below it (said in the inconclusive verdicts)."""
 TIMED = "timed analysis (zones)"
 UNTIMED_WITHIN = "decided by timed analysis: run coral-check verify --timed"
 NO_PROFILE = "no vehicle profile: timed analysis needs the mission's profile"
@@ -316,10 +324,17 @@ class _Checker:
         # A small Karp-Miller tree first: on an unbounded net it proves unboundedness in
         # milliseconds, and the explicit search is then only worth a small budget (it
         # can still find real counterexamples for the other properties).
+        # On a wide net each node costs the width of the net: the quick tree keeps to
+        # a number of place values (2,000 nodes up to 1,000 places) and to a tenth of
+        # the time left, so it stays quick whatever the net and the limit.
+        left = budget.remaining()
+        quick = QUICK_COVERABILITY_SECONDS
+        if left is not None:  # (two digits: the slice is quoted when it stops the tree)
+            quick = float(f"{min(quick, left * QUICK_COVERABILITY_SHARE):.2g}")
         self.cover = coverability(
             net,
-            max_nodes=QUICK_COVERABILITY_NODES,
-            budget=budget.child(seconds=QUICK_COVERABILITY_SECONDS),
+            max_nodes=node_cap(QUICK_COVERABILITY_NODES, net, QUICK_COVERABILITY_CELLS),
+            budget=budget.child(seconds=quick),
         )
         self.symbolic: SymbolicResult | None = None
         if options.method == "symbolic":
@@ -333,15 +348,21 @@ class _Checker:
         if self.cover.bounded is False:
             max_states = min(max_states or UNBOUNDED_STATES, UNBOUNDED_STATES)
             time_limit = min(time_limit or UNBOUNDED_SECONDS, UNBOUNDED_SECONDS)
-        if time_limit is not None and budget.limit is not None:
-            # The search gets a share of the command's limit, so the proofs that need
-            # no complete state space (the state equation, coverability) still run.
-            time_limit = min(time_limit, budget.limit * SEARCH_SHARE)
+        left = budget.remaining()
+        shared = time_limit is not None and left is not None and left * SEARCH_SHARE < time_limit
+        if shared and left is not None:
+            # The search gets a share of what is left of the command's limit (reading
+            # the file and the quick tree came first), so the proofs that need no
+            # complete state space (the state equation, coverability) still run.
+            time_limit = left * SEARCH_SHARE
+        search = budget.child(seconds=time_limit)
+        if shared:  # its reason names the limit the user set, not the share
+            search.limit = budget.limit
         before = resident_bytes()
         self.space: StateSpace = explore(
             net,
             max_states=max_states,
-            budget=budget.child(seconds=time_limit),
+            budget=search,
             por=options.por,
             visible=visible,
             progress=options.progress,
@@ -353,6 +374,9 @@ class _Checker:
         self.exact = self.space.complete and not self.space.reduced
         self.method = EXPLICIT_POR if self.space.reduced else EXPLICIT
         self._graph: StateGraph | GraphError | None = None
+        # Why the decision diagrams did not run after an explicit stop, when it was
+        # the time left: quoted with every verdict the incomplete search left open.
+        self.symbolic_skipped = ""
         if (
             options.method == "auto"
             and not self.space.complete
@@ -362,7 +386,26 @@ class _Checker:
             and symbolic_applicable(net)
             and not self.budget.expired()  # (a search stopped by the time limit left none)
         ):
-            self.symbolic = self._symbolic(AUTO_SYMBOLIC_SHARE)
+            self.symbolic_skipped = self._symbolic_too_slow(AUTO_SYMBOLIC_SHARE)
+            if not self.symbolic_skipped:
+                self.symbolic = self._symbolic(AUTO_SYMBOLIC_SHARE)
+
+    def _symbolic_too_slow(self, share: float) -> str:
+        """Why ``share`` of the time left is too short to set up decision diagrams on
+        this net (`SYMBOLIC_SETUP_SECONDS_PER_ARC`), or "" when it is not."""
+        left = self.budget.remaining()
+        if left is None:
+            return ""
+        net = self.net
+        size = len(net.places) + sum(len(t.inputs) + len(t.outputs) for t in net.transitions)
+        needed = size * SYMBOLIC_SETUP_SECONDS_PER_ARC
+        if left * share >= needed:
+            return ""
+        return (
+            f"decision diagrams not run: {left:.1f} s left of the time limit of "
+            f"{self.budget.limit:g} s, and setting them up on {size:,} places and arcs "
+            f"takes about {needed:.1f} s"
+        )
 
     def _symbolic(self, share: float) -> SymbolicResult:
         """The reachable markings as a decision diagram, with ``share`` of the time
@@ -425,7 +468,10 @@ class _Checker:
     def _incomplete(self) -> str:
         if self.space.reduced and self.space.complete:
             return "the reduced state space does not decide this"
-        return f"the state space is incomplete ({self.space.stopped_reason})"
+        text = f"the state space is incomplete ({self.space.stopped_reason})"
+        if self.symbolic_skipped:
+            text += f"; {self.symbolic_skipped}"
+        return text
 
     def _witness(self, state: int) -> Evidence:
         return witness(self.space, state)
@@ -552,10 +598,11 @@ class _Checker:
                 f"in all {self.space.states} reachable states",
             )
         result = self.cover
-        if result.bounded is None:  # the quick tree was cut off: grow a full one
+        if result.bounded is None and not self.budget.expired():
+            # the quick tree was cut off: grow a full one
             result = coverability(
                 self.net,
-                max_nodes=self.options.coverability_nodes,
+                max_nodes=node_cap(self.options.coverability_nodes, self.net, COVERABILITY_CELLS),
                 budget=self.budget.child(seconds=COVERABILITY_SECONDS),
             )
         if result.bounded is False:
@@ -582,6 +629,16 @@ class _Checker:
             )
         if result.bounded:
             return PropertyResult("bounded", title, Verdict.PROVEN, result.method, result.explain())
+        if self.budget.expired():
+            # z3's linear program takes its time building constraints, past any limit
+            return PropertyResult(
+                "bounded",
+                title,
+                Verdict.INCONCLUSIVE,
+                f"{self.method}; {result.method}",
+                f"{self._incomplete()}; {result.explain()}; structural boundedness not "
+                f"run: {self.budget.time_reason()}",
+            )
         from analysis.structural import structural_boundedness
 
         structural = structural_boundedness(
