@@ -941,7 +941,7 @@ class _EnablingBits:
         never = np.ones((1, n_t), dtype=bool)
         never[0, fnet.never] = False
         self.always = self.pack(never)[0]  # transitions that can be enabled at all
-        self.twin_steps: list[tuple[int, npt.NDArray[np.uint64]]] = []
+        self.twin_groups: list[tuple[npt.NDArray[np.uint64], ...]] = []
         self._twin_runs(fnet.effects)
 
     def _twin_runs(self, effects: Arcs) -> None:
@@ -951,10 +951,11 @@ class _EnablingBits:
         encode markings one to one), so only the lowest enabled one of each class is
         fired (`twins_below` gives the others). Classes are cut into runs of
         consecutive transitions within a bit word, and each run keeps its own lowest
-        bit: a scan of a few shifts over the words, not a pass per class.
+        bit: one subtraction over the words for all runs, not a pass per class.
 
-        Sets ``twin_steps``: per shift ``d`` (1, 2, 4, ...), the bits ``b`` of a run
-        whose bit ``b - d`` is in the same run (empty when there are no twins)."""
+        Sets ``twin_groups``: per group of runs no two of which touch, the masks
+        ``(members, firsts, guards)``: the runs' bits, their first bits, and the bits
+        just above their last ones (empty when there are no twins)."""
         by_effect: dict[tuple[tuple[int, ...], tuple[int, ...]], int] = {}
         runs: list[tuple[int, int]] = []  # (first, last) transitions of each run
         last_of: dict[int, int] = {}  # class -> its last transition seen
@@ -971,28 +972,40 @@ class _EnablingBits:
                 else:
                     runs.append((t - 1, t))
             last_of[c] = t
-        longest = max((b - a + 1 for a, b in runs), default=1)
-        d = 1
-        while d < longest:
-            step = np.zeros((1, self.n_t), dtype=bool)
-            for a, b in runs:
-                step[0, a + d : b + 1] = True
-            self.twin_steps.append((d, self.pack(step)[0]))
-            d *= 2
+        # a run goes to the first group whose last run does not touch it (a run that
+        # ends a word touches nothing: its borrow leaves the word)
+        groups: list[list[tuple[int, int]]] = []
+        for run in runs:
+            home = next((g for g in groups if g[-1][1] + 1 < run[0] or g[-1][1] % 64 == 63), None)
+            if home is None:
+                groups.append(home := [])
+            home.append(run)
+        width = 64 * self.words
+        for group in groups:
+            masks = np.zeros((3, width), dtype=bool)
+            for a, b in group:
+                masks[0, a : b + 1] = True
+                masks[1, a] = True
+                if (b + 1) % 64:  # (past a word's top bit the borrow leaves the word)
+                    masks[2, b + 1] = True
+            members, firsts, guards = self.pack(masks)
+            self.twin_groups.append((members, firsts, guards))
 
     def twins_below(self, enabled: npt.NDArray[np.uint64]) -> npt.NDArray[np.uint64]:
         """``(n, words)``: the bits of ``enabled`` with an enabled bit below them in
-        their run (see `_twin_runs`): a segmented prefix OR over the runs by doubling
-        shifts (the shifted bits only land on bits of the same run)."""
-        seen = enabled.copy()
-        for d, step in self.twin_steps:
-            shifted = seen << np.uint64(d)
-            shifted &= step
-            seen |= shifted
-        seen <<= np.uint64(1)
-        seen &= self.twin_steps[0][1]
-        seen &= enabled
-        return seen
+        their run (see `_twin_runs`). Subtracting a run's first bit from its bits
+        borrows up to the lowest set one, which it clears, and no further: ``x & (x -
+        first)`` is ``x`` without its lowest bit. A guard bit above each run stops the
+        borrow of a run with no bit set (so the runs of a group must not touch)."""
+        out: npt.NDArray[np.uint64] | None = None
+        for members, firsts, guards in self.twin_groups:
+            bits = enabled & members
+            borrowed = bits | guards
+            borrowed -= firsts
+            bits &= borrowed
+            out = bits if out is None else out | bits
+        assert out is not None
+        return out
 
     @staticmethod
     def _passes(
@@ -1587,7 +1600,7 @@ class _Explorer:
         enabled = bits.enabled(cols)
         counts = np.bitwise_count(enabled).sum(axis=1, dtype=np.int64)
         self.fired |= bits.transitions(np.bitwise_or.reduce(enabled, axis=0))
-        twins = bits.twins_below(enabled) if bits.twin_steps else None
+        twins = bits.twins_below(enabled) if bits.twin_groups else None
         if sleep is not None and self.sleep is not None:
             enabled &= ~sleep
         if self.self_loops.size:

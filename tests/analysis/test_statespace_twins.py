@@ -150,11 +150,30 @@ def test_runs_stop_at_word_ends_and_at_other_classes() -> None:
     cn = CompactNet.from_net(Net("runs", places, tuple(ts)))
     explorer = statespace._Explorer(cn, None, Budget(), None, None, 1 << 15)
     bits = explorer.bits
-    assert bits is not None and [d for d, _ in bits.twin_steps] == [1, 2, 4, 8, 16, 32]
+    assert bits is not None and len(bits.twin_groups) == 1  # (no two runs touch)
     everything = np.full((1, 2), ~np.uint64(0), dtype=np.uint64)
     below = bits.transitions(bits.twins_below(everything)[0])
     assert np.flatnonzero(~below).tolist() == [0, 3, 4, 5, 64]
-    # with only t2, t7 and t9 enabled: t2 and t7 are the lowest of their runs
+    # with only t2, t7, t9 and t65 enabled: t2, t7 and t65 are the lowest of their runs
     some = np.zeros((1, 2), dtype=np.uint64)
-    some[0, 0] = np.uint64((1 << 2) | (1 << 7) | (1 << 9))
+    some[0] = [(1 << 2) | (1 << 7) | (1 << 9), 1 << 1]
     assert np.flatnonzero(bits.transitions(bits.twins_below(some)[0])).tolist() == [9]
+
+
+def test_touching_runs_of_two_classes_keep_a_lowest_bit_each() -> None:
+    # t0..t3 move a to b, t4..t6 move a to c: two runs that touch, in two groups; an
+    # empty run must not borrow from the run above it
+    places = (Place("a", 1), Place("b"), Place("c"))
+    ts = [Transition(f"t{i}", (("a", 1),), (("b" if i < 4 else "c", 1),)) for i in range(7)]
+    cn = CompactNet.from_net(Net("touching", places, tuple(ts)))
+    bits = statespace._Explorer(cn, None, Budget(), None, None, 1 << 15).bits
+    assert bits is not None and len(bits.twin_groups) == 2
+    for enabled in range(1 << 7):
+        row = np.array([[enabled]], dtype=np.uint64)
+        dropped = np.flatnonzero(bits.transitions(bits.twins_below(row)[0])).tolist()
+        on = [i for i in range(7) if enabled >> i & 1]
+        keep = [
+            min((i for i in on if i < 4), default=-1),
+            min((i for i in on if i >= 4), default=-1),
+        ]
+        assert dropped == [i for i in on if i not in keep]
