@@ -1598,8 +1598,13 @@ class _Explorer:
         asleep or not (Dekker-PT-015: 42 % fewer keys); the fired sets, and so the
         sleep sets, keep them all."""
         enabled = bits.enabled(cols)
-        counts = np.bitwise_count(enabled).sum(axis=1, dtype=np.int64)
-        self.fired |= bits.transitions(np.bitwise_or.reduce(enabled, axis=0))
+        # (a word at a time: numpy reduces the short rows of ``(n, words)`` 5-9x slower)
+        per_word = np.bitwise_count(enabled)
+        counts = per_word[:, 0].astype(np.int64)
+        for k in range(1, bits.words):
+            counts += per_word[:, k]
+        some = [np.bitwise_or.reduce(enabled[:, k]) for k in range(bits.words)]
+        self.fired |= bits.transitions(np.asarray(some, dtype=np.uint64))
         twins = bits.twins_below(enabled) if bits.twin_groups else None
         if sleep is not None and self.sleep is not None:
             enabled &= ~sleep
