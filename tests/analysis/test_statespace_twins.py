@@ -74,7 +74,7 @@ def _without_twins(net: Net) -> StateSpace:
         return explore(net, max_states=400)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(nets_with_twins())
 def test_firing_one_twin_finds_the_same_space_in_the_same_order(net: Net) -> None:
     with pytest.MonkeyPatch.context() as patch:
