@@ -84,9 +84,11 @@ def release_free_heap() -> None:
     After `settle_allocator` glibc's trim threshold is twice its raised mmap threshold
     (60 MB), so it never shrinks the heap by itself: the largest step's temporaries
     would stay resident to the end of the search, on top of the store that keeps
-    growing. The explorer calls it between wide layers and the key store before its
-    table grows (its largest allocations): the price, a page fault per page the next
-    steps touch again, is small against the work in between."""
+    growing. The key store calls it before its table grows (its largest allocation,
+    near the search's peak): the price, a page fault per page the next steps touch
+    again, is small against the work between growths. Calling it after every layer of
+    65,536 states or more cost Peterson-PT-3 a tenth of its search (130 layers) once
+    steps were bounded in bytes, for 0.2 resident bytes per state."""
     if _MALLOC_TRIM is not None:
         _MALLOC_TRIM(0)
 

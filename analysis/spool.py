@@ -86,13 +86,15 @@ class _Stream:
 class RowSpool:
     """Rows of ``width`` ``uint64`` words, appended at the back and taken at the front
     (`take` returns new arrays: nothing read keeps a map alive). ``sparse`` says whether
-    only nonzero words are kept (None until the first rows, which decide it)."""
+    only nonzero words are kept: False never, True always (rows of 2 to 8 words), None
+    until the first rows, which decide it (`SPARSE_SHARE`)."""
 
-    def __init__(self, width: int) -> None:
+    def __init__(self, width: int, sparse: bool | None = None) -> None:
         if width < 1:
             raise ValueError(f"rows need at least one word, not {width}")
         self.width = width
-        self.sparse: bool | None = None if 2 <= width <= SPARSE_MAX_WORDS else False
+        fits = 2 <= width <= SPARSE_MAX_WORDS
+        self.sparse: bool | None = sparse if fits and sparse is not False else False
         self._words = _Stream(np.uint64)
         self._marks = _Stream(np.uint8)  # sparse rows: bit k set when word k is nonzero
         self.size = 0  # rows appended and not yet taken

@@ -47,10 +47,10 @@ Memory per stored state: the bytes of a one-word key its fields reach
 bytes of transition, and 6.7 to 10 bytes of hash table (a 4-byte state number per slot,
 load 0.4 to 0.6, see `KeyStore`): about 12 to 20 bytes for one-word nets. What else is
 resident while the search runs, and what bounds it: the sleep sets of the layer being
-expanded and of the next one (only their nonzero words, in maps of their own that are
-unmapped as they are read: `analysis.spool`), one step's temporaries
-(`BLOCK_TEMPORARY_BYTES`), and what the C heap keeps free, which is given back between
-wide layers and before the table grows (`analysis.allocator.release_free_heap`).
+expanded and of the next one (in maps of their own that are unmapped as they are read,
+only their nonzero words where layers are wide: `analysis.spool`), one step's
+temporaries (`BLOCK_TEMPORARY_BYTES`), and what the C heap keeps free, which is given
+back before the table grows (`analysis.allocator.release_free_heap`).
 
 Typical use::
 
@@ -69,7 +69,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import numpy.typing as npt
 
-from analysis.allocator import heap_free_bytes, release_free_heap, settle_allocator
+from analysis.allocator import heap_free_bytes, settle_allocator
 from analysis.budget import (
     Budget,
     BudgetExceeded,
@@ -114,15 +114,17 @@ builds: `EDGES_PER_STEP` assumes keys of a word or two, while a net of 10,000 pl
 2-bit counts has keys of 320 words, where that many edges would take gigabytes."""
 
 BLOCK_TEMPORARY_BYTES = 8 << 20
-"""Most bytes of temporaries a step is sized for (`_Explorer.block_size`, by
-`state_bytes` and `edge_bytes`). They are freed after the step, but the largest step
-sets the heap's high-water mark for the whole layer on top of the store and the sleep
-sets: on SharedMemory-PT-000010 (4 words of sleep sets, 3 edges fired per marking)
-blocks of `DEFAULT_CHUNK` markings took 15 MB, 8 resident bytes per stored state."""
+"""Bytes of temporaries a step is sized for (`_Explorer.block_size`, by `state_bytes`
+and `edge_bytes`). They are freed after the step, but the largest step sets the heap's
+high-water mark on top of the store and the sleep sets: on SharedMemory-PT-000010 (4
+words of sleep sets, 3 edges fired per marking) blocks of `DEFAULT_CHUNK` markings took
+15 MB, 8 resident bytes per stored state. Half the store's bytes as the budget, where
+that is more, cost SharedMemory 2 of those bytes back (its peak is at the end, where
+the store is largest)."""
 
-TRIM_LAYER = 1 << 16
-"""Layers of at least this many states end by giving the C heap's free pages back
-(`analysis.allocator.release_free_heap`)."""
+SPARSE_SLEEP_SHARE = 4
+"""A layer's successors keep sparse sleep sets (`analysis.spool.RowSpool`) when the
+layer's own sleep sets would take at least a quarter of the store's bytes."""
 
 CELLS_PER_STEP = 1 << 23
 """Most (transition, marking) cells of one step's enabled matrix (8 MB of booleans)."""
@@ -1813,9 +1815,14 @@ class _Explorer:
             # unmaps its pages as they are read: a wide layer's sleep sets (8 bytes per
             # tracked 64 transitions per state) are never held twice, they shrink as the
             # next layer's grow, and they never fragment the heap (`analysis.spool`).
-            self.next_sleep = (
-                RowSpool(self.sleep.words) if self.sleep is not None and self.sleep_next else None
-            )
+            self.next_sleep = None
+            if self.sleep is not None and self.sleep_next:
+                # sparse rows cost time (Peterson-PT-3: a tenth of the search); they pay
+                # where layers are wide against the store (SharedMemory-PT-000010: a
+                # layer's sleep sets up to 1.7 times the store's bytes, Peterson 0.15)
+                words = self.sleep.words
+                wide = SPARSE_SLEEP_SHARE * width * words * 8 >= self.store.nbytes
+                self.next_sleep = RowSpool(words, sparse=None if wide else False)
             sleep_all = sleeps
             sleeps = None
             c = 0
@@ -1831,8 +1838,6 @@ class _Explorer:
                 self.check_time(self.store.size - base - c)
             base += width
             sleeps, self.next_sleep = self.next_sleep, None
-            if width >= TRIM_LAYER:
-                release_free_heap()
             if base < self.store.size:
                 self.layer_starts.append(base)
 

@@ -1,11 +1,10 @@
 """What the explorer does to keep its resident memory close to what it stores: steps
 sized in bytes (`BLOCK_TEMPORARY_BYTES`), sleep sets in a spool of their own, and the
-C heap's free pages given back between wide layers and before the table grows. None of
-it may change what is found."""
+C heap's free pages given back before the table grows. None of it may change what is
+found."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 import analysis.encoding.keystore as keystore
@@ -66,23 +65,19 @@ def test_small_blocks_find_the_same_space(
     assert small.trace_to(small.states - 1) == whole.trace_to(whole.states - 1)
 
 
-def test_free_heap_is_given_back_between_wide_layers_and_before_the_table_grows(
+def test_free_heap_is_given_back_before_the_table_grows(
     monkeypatch: pytest.MonkeyPatch, philosophers: CompactNet
 ) -> None:
-    calls = {"layer": 0, "table": 0}
+    growths: list[int] = []
+    resize = keystore.KeyStore._resize
 
-    def layer() -> None:
-        calls["layer"] += 1
+    def recorded(self: keystore.KeyStore, slots: int) -> None:
+        growths.append((slots - self._slots) * self._buffer.itemsize)
+        resize(self, slots)
 
-    def table() -> None:
-        calls["table"] += 1
-
-    monkeypatch.setattr(statespace, "TRIM_LAYER", 4096)
-    monkeypatch.setattr(statespace, "release_free_heap", layer)
+    calls: list[int] = []
     monkeypatch.setattr(keystore, "TRIM_GROWTH_BYTES", 1 << 16)
-    monkeypatch.setattr(keystore, "release_free_heap", table)
-    space = explore(philosophers, max_states=100_000)
-    widths = np.diff(np.append(space.layer_starts, space.states))
-    wide = int(np.count_nonzero(widths >= 4096))
-    assert calls["layer"] == wide >= 1
-    assert calls["table"] >= 1
+    monkeypatch.setattr(keystore, "release_free_heap", lambda: calls.append(1))
+    monkeypatch.setattr(keystore.KeyStore, "_resize", recorded)
+    explore(philosophers, max_states=100_000)
+    assert len(calls) == sum(1 for grown in growths if grown >= 1 << 16) >= 1
