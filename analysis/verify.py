@@ -44,7 +44,7 @@ from analysis.report import (
     witness,
 )
 from analysis.stategraph import GraphError, StateGraph, build_graph
-from analysis.statespace import DEFAULT_CHUNK, EDGES_PER_STEP, StateSpace, explore
+from analysis.statespace import StateSpace, explore
 from analysis.symbolic.report import (
     AUTO_SYMBOLIC_MIN_STATES,
     SYMBOLIC,
@@ -101,14 +101,6 @@ REDUCED_BY = {
 """The method of a deadlock verdict the reduced net decided without its search
 (`analysis.reduce.deadlock.DeadlockAnswer.by`)."""
 AUTO_SYMBOLIC_SHARE = 0.5  # of the time left, for decision diagrams after an explicit stop
-WIDE_CHUNK_TRANSITIONS = 2_000
-"""From this many transitions the explicit search gets frontier blocks of at most
-``EDGES_PER_STEP // transitions`` markings (at least 256): a step then handles at most
-`EDGES_PER_STEP` edges even if every transition is enabled. The explorer sizes its
-blocks from the edges per *stored* marking, which after a first layer of 300 markings
-with 6,000 edges each (and 45,000 stored) said 40 and gave one step of 7,513 markings
-and 45M edges: 8-13 s past a 1 s limit. No conformance net has 2,000 transitions (the
-widest has 1,111)."""
 SYMBOLIC_SETUP_SECONDS_PER_ARC = 50e-6
 """What setting up decision diagrams (invariants, variable order, relations) costs per
 arc and place before their budget is first read: 1.3-2.1 s on the 40,000 arcs of two
@@ -367,9 +359,6 @@ class _Checker:
         if shared:  # its reason names the limit the user set, not the share
             search.limit = budget.limit
         before = resident_bytes()
-        chunk = DEFAULT_CHUNK
-        if len(net.transitions) >= WIDE_CHUNK_TRANSITIONS:
-            chunk = max(256, EDGES_PER_STEP // len(net.transitions))
         self.space: StateSpace = explore(
             net,
             max_states=max_states,
@@ -377,7 +366,6 @@ class _Checker:
             por=options.por,
             visible=visible,
             progress=options.progress,
-            chunk=chunk,
         )
         # What the search really cost: the peak's growth over the resident memory
         # before it (the peak of the whole process, so a larger earlier peak hides it:

@@ -12,6 +12,7 @@ import analysis.statespace as statespace
 from analysis.encoding import CompactNet
 from analysis.statespace import StateSpace, explore
 from coral_lang.pnml import read_pnml
+from tests.analysis.test_command_budget import _wide
 from tests.conftest import CONFORMANCE
 
 
@@ -81,3 +82,32 @@ def test_free_heap_is_given_back_before_the_table_grows(
     monkeypatch.setattr(keystore.KeyStore, "_resize", recorded)
     explore(philosophers, max_states=100_000)
     assert len(calls) == sum(1 for grown in growths if grown >= 1 << 16) >= 1
+
+
+def test_steps_of_a_wide_net_are_sized_by_edges_per_expanded_state(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # 300 two-place cycles with 20 parallel transitions each: about 6,000 edges per
+    # marking. Sized by edges per *stored* state (a layer of 300 markings stores 45,000
+    # successors), a block took 883 markings and 2.1 million edges here, and 7,513 and
+    # 45 million later in the search (8-13 s for one step).
+    cn = CompactNet.from_net(_wide(300, 20))
+    steps: list[int] = []
+    depth = [0]
+    step = statespace._Explorer.step
+
+    def recorded(self: statespace._Explorer, *args: object) -> object:
+        depth[0] += 1
+        before = self.edges
+        try:
+            return step(self, *args)  # type: ignore[arg-type]
+        finally:
+            depth[0] -= 1
+            if not depth[0]:  # a block of the layer loop (halves of a split inside it)
+                steps.append(self.edges - before)
+
+    monkeypatch.setattr(statespace._Explorer, "step", recorded)
+    space = explore(cn, max_states=100_000)
+    assert space.states == 100_000 and len(steps) >= 2
+    smallest_block = 256 * cn.n_transitions  # (blocks are never below 256 markings)
+    assert max(steps) <= max(2 * statespace.EDGES_PER_STEP, smallest_block)

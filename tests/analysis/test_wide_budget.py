@@ -23,9 +23,9 @@ from analysis.budget import Budget
 from analysis.coverability import coverability, node_cap
 from analysis.pipeline import CheckOptions, check_file
 from analysis.report import Verdict
-from analysis.statespace import DEFAULT_CHUNK, EDGES_PER_STEP, StateSpace
+from analysis.statespace import StateSpace
 from analysis.symbolic.encoding import force
-from analysis.verify import WIDE_CHUNK_TRANSITIONS, VerifyOptions, run_verification
+from analysis.verify import VerifyOptions, run_verification
 from coral_lang.pnml import write_pnml
 from tests.analysis.wide_nets import rings
 
@@ -110,28 +110,6 @@ def test_decision_diagrams_are_not_started_without_time_to_set_them_up(
     assert not report.statespace.complete
     detail = report.property("dead_transitions").detail
     assert "decision diagrams not run:" in detail and "3,000 places and arcs" in detail
-
-
-@pytest.mark.parametrize(("rings_of_ten", "chunk"), [(100, DEFAULT_CHUNK), (200, 262), (300, 256)])
-def test_a_wide_net_is_searched_in_blocks_of_bounded_edges(
-    monkeypatch: pytest.MonkeyPatch, rings_of_ten: int, chunk: int
-) -> None:
-    """From `WIDE_CHUNK_TRANSITIONS` transitions a block of the search is at most
-    ``EDGES_PER_STEP // transitions`` markings (at least 256), so one step handles a
-    bounded number of edges even where every transition is enabled."""
-    asked: list[int] = []
-    search = verify_module.explore  # type: ignore[attr-defined]
-
-    def recorded(*args: Any, **kwargs: Any) -> StateSpace:
-        asked.append(kwargs["chunk"])
-        return search(*args, **{**kwargs, "max_states": 10})
-
-    monkeypatch.setattr(verify_module, "explore", recorded)
-    net = rings(rings_of_ten, 10)
-    run_verification(net, VerifyOptions(max_states=10, structural=False))
-    assert asked == [chunk]
-    if len(net.transitions) >= WIDE_CHUNK_TRANSITIONS:
-        assert chunk == max(256, EDGES_PER_STEP // len(net.transitions))
 
 
 def test_a_wide_node_reads_the_budget_between_its_children() -> None:
