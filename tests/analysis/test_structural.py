@@ -234,6 +234,7 @@ def test_public_surface_of_the_structural_modules() -> None:
             "CoverabilityResult",
             "PumpingTrace",
             "coverability",
+            "node_cap",
             "replay_pump",
         },
     }
