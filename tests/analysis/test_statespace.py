@@ -7,7 +7,6 @@ import contextlib
 import io
 import itertools
 from collections.abc import Iterator
-from typing import Any
 from unittest import mock
 
 import networkx as nx
@@ -25,6 +24,7 @@ from analysis.graph import to_networkx
 from analysis.progress import ProgressInfo, ProgressPrinter
 from analysis.statespace import StateSpace, explore
 from coral_lang.net import Net, Place, Transition
+from tests.analysis.explored import counting_fired
 from tests.analysis.nets import replay
 from tests.analysis.reference import ReferenceResult, explore_reference
 from tests.analysis.strategies import small_nets
@@ -464,17 +464,9 @@ def test_the_repeat_filter_keeps_every_first_occurrence_in_order(
 
 
 def _count_fired(net: Net, mode: str) -> tuple[StateSpace, int]:
-    fired = 0
-    insert = statespace._Explorer.insert
-
-    def counting(self: Any, cols: Any, base: int, edges: Any, *args: Any, **kw: Any) -> Any:
-        nonlocal fired
-        fired += edges[0].size
-        return insert(self, cols, base, edges, *args, **kw)
-
-    with _mode(mode), mock.patch.object(statespace._Explorer, "insert", counting):
+    with _mode(mode), counting_fired() as fired:
         space = explore(net)
-    return space, fired
+    return space, fired[0]
 
 
 def test_sleep_sets_fire_about_one_edge_per_state_on_independent_transitions() -> None:

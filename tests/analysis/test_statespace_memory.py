@@ -10,22 +10,11 @@ import pytest
 import analysis.encoding.keystore as keystore
 import analysis.statespace as statespace
 from analysis.encoding import CompactNet
-from analysis.statespace import StateSpace, explore
+from analysis.statespace import explore
 from coral_lang.pnml import read_pnml
+from tests.analysis.explored import fingerprint
 from tests.analysis.test_command_budget import _wide
 from tests.conftest import CONFORMANCE
-
-
-def _summary(space: StateSpace) -> tuple[object, ...]:
-    return (
-        space.states,
-        space.edges,
-        space.complete,
-        space.place_bounds.tolist(),
-        space.deadlocks.tolist(),
-        space.fired_transitions.tolist(),
-        space.layer_starts.tolist(),
-    )
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +51,7 @@ def test_small_blocks_find_the_same_space(
     whole = explore(philosophers, max_states=100_000)
     monkeypatch.setattr(statespace, "BLOCK_TEMPORARY_BYTES", 1)  # blocks of 256 markings
     small = explore(philosophers, max_states=100_000)
-    assert _summary(small) == _summary(whole)
+    assert fingerprint(small) == fingerprint(whole)
     assert small.trace_to(small.states - 1) == whole.trace_to(whole.states - 1)
 
 

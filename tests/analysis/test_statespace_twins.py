@@ -5,7 +5,6 @@ its numbering, edges and traces stay those of the search that fires them all."""
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Any
 
 import numpy as np
 import pytest
@@ -17,6 +16,7 @@ from analysis.budget import Budget
 from analysis.encoding import CompactNet
 from analysis.statespace import StateSpace, explore
 from coral_lang.net import Net, Place, Transition
+from tests.analysis.explored import counting_fired, fingerprint
 from tests.analysis.nets import replay
 from tests.analysis.reference import explore_reference
 from tests.analysis.strategies import small_nets
@@ -55,19 +55,6 @@ def nets_with_twins(draw: st.DrawFn) -> Net:
     return Net("twins", net.places, tuple(order))
 
 
-def _fingerprint(space: StateSpace) -> tuple[object, ...]:
-    return (
-        space.states,
-        space.edges,
-        space.keys.tolist(),
-        space.via.tolist(),
-        space.deadlocks.tolist(),
-        space.place_bounds.tolist(),
-        space.fired_transitions.tolist(),
-        space.layer_starts.tolist(),
-    )
-
-
 def _without_twins(net: Net) -> StateSpace:
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(statespace._EnablingBits, "_twin_runs", lambda self, effects: None)
@@ -86,7 +73,7 @@ def test_firing_one_twin_finds_the_same_space_in_the_same_order(net: Net) -> Non
     if not space.complete:
         assert space.states == every.states
         return
-    assert _fingerprint(space) == _fingerprint(every)
+    assert fingerprint(space) == fingerprint(every)
     ref = explore_reference(net, max_states=400)
     assert space.states == len(ref.states) and space.edges == ref.edges
     for index in space.deadlocks.tolist():
@@ -109,20 +96,11 @@ def _withdraw(k: int) -> Net:
 
 
 def _fired(net: Net, twins: bool) -> tuple[StateSpace, int]:
-    fired = 0
-    insert = statespace._Explorer.insert
-
-    def counting(self: Any, cols: Any, base: int, edges: Any, *args: Any, **kw: Any) -> Any:
-        nonlocal fired
-        fired += edges[0].size
-        return insert(self, cols, base, edges, *args, **kw)
-
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(statespace._Explorer, "insert", counting)
+    with pytest.MonkeyPatch.context() as patch, counting_fired() as fired:
         if not twins:
             patch.setattr(statespace._EnablingBits, "_twin_runs", lambda self, effects: None)
         space = explore(net)
-    return space, fired
+    return space, fired[0]
 
 
 @pytest.mark.usefixtures("wide")

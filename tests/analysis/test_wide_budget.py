@@ -27,24 +27,12 @@ from analysis.statespace import StateSpace
 from analysis.symbolic.encoding import force
 from analysis.verify import VerifyOptions, run_verification
 from coral_lang.pnml import write_pnml
+from tests.analysis.test_budget import FakeClock
 from tests.analysis.wide_nets import rings
 
 MARGIN_S = 0.2
 """Virtual seconds the check may read past its limit: the stages after the deadline
 read the clock a few times each to find it spent (a reading moves it 10 ms)."""
-
-
-class FakeClock:
-    """Moves ``step`` on every reading; a test moves ``now`` further itself."""
-
-    def __init__(self, step: float) -> None:
-        self.now = 0.0
-        self.step = step
-
-    def __call__(self) -> float:
-        now = self.now
-        self.now += self.step
-        return now
 
 
 def test_a_slow_read_leaves_the_analysis_only_the_rest_of_the_limit(
