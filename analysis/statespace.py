@@ -114,13 +114,15 @@ builds: `EDGES_PER_STEP` assumes keys of a word or two, while a net of 10,000 pl
 2-bit counts has keys of 320 words, where that many edges would take gigabytes."""
 
 BLOCK_TEMPORARY_BYTES = 8 << 20
-"""Bytes of temporaries a step is sized for (`_Explorer.block_size`, by `state_bytes`
-and `edge_bytes`). They are freed after the step, but the largest step sets the heap's
-high-water mark on top of the store and the sleep sets: on SharedMemory-PT-000010 (4
-words of sleep sets, 3 edges fired per marking) blocks of `DEFAULT_CHUNK` markings took
-15 MB, 8 resident bytes per stored state. Half the store's bytes as the budget, where
-that is more, cost SharedMemory 2 of those bytes back (its peak is at the end, where
-the store is largest)."""
+"""Bytes of temporaries a step is sized for at least (`_Explorer.block_size`, by
+`state_bytes` and `edge_bytes`); at most a quarter of the store's bytes beyond the next
+layer's sleep sets when that is more. They are freed after the step, but the largest
+step sets the heap's high-water mark on top of the store and the sleep sets: on
+SharedMemory-PT-000010 (4 words of sleep sets, 3 edges fired per marking, layers whose
+sleep sets outweigh the store) blocks of `DEFAULT_CHUNK` markings took 15 MB, 8
+resident bytes per stored state, and any budget above 8 MB added 2 to 4 of them; on
+Peterson-PT-3 (332 transitions tested a block at a time) small blocks cost time, and
+the quarter of the store gives back part of it as the store grows."""
 
 SPARSE_SLEEP_SHARE = 4
 """A layer's successors keep sparse sleep sets (`analysis.spool.RowSpool`) when the
@@ -2021,7 +2023,9 @@ class _Explorer:
             by_edges = int(by_edges * max(per_state, 1.0) / fired)
         else:
             fired = per_state
-        by_bytes = BLOCK_TEMPORARY_BYTES // (self.state_bytes + int(fired * self.edge_bytes))
+        spool = 0 if self.next_sleep is None else self.next_sleep.nbytes
+        budget = max(BLOCK_TEMPORARY_BYTES, (self.store.nbytes - spool) // 4)
+        by_bytes = budget // (self.state_bytes + int(fired * self.edge_bytes))
         size = max(min(256, self.chunk), min(self.chunk, by_edges, by_matrix, by_bytes))
         if self.reducer is not None and self.choice_markings < POR_SAMPLE:
             # Small steps until the reduction is judged, so it is judged on the sample.
