@@ -93,8 +93,7 @@ class RowSpool:
         if width < 1:
             raise ValueError(f"rows need at least one word, not {width}")
         self.width = width
-        fits = 2 <= width <= SPARSE_MAX_WORDS
-        self.sparse: bool | None = sparse if fits and sparse is not False else False
+        self.sparse: bool | None = sparse if 2 <= width <= SPARSE_MAX_WORDS else False
         self._words = _Stream(np.uint64)
         self._marks = _Stream(np.uint8)  # sparse rows: bit k set when word k is nonzero
         self.size = 0  # rows appended and not yet taken

@@ -1178,8 +1178,7 @@ class _Explorer:
         self.stopped: str | None = None
         wanted = sleep_sets and reducer is None and cn.n_transitions > 1
         self.sleep = SleepSets(cn) if wanted else None
-        self.sleep_next = False  # whether this layer computes the next one's sleep sets
-        self.next_sleep: RowSpool | None = None  # the next layer's, while sleep_next
+        self.next_sleep: RowSpool | None = None  # while a layer computes the next one's
         self.choice_markings = 0  # POR: markings with a choice seen, firings kept of them
         self.choice_enabled = 0
         self.choice_fired = 0
@@ -1814,13 +1813,12 @@ class _Explorer:
                     base = done[1]
                     sleeps = None
                     continue
-            self.sleep_next = self.sleep is not None and self.edges >= SLEEP_MIN_DEGREE * base
             # Each block takes its sleep sets off the front of the layer's spool, which
             # unmaps its pages as they are read: a wide layer's sleep sets (8 bytes per
             # tracked 64 transitions per state) are never held twice, they shrink as the
             # next layer's grow, and they never fragment the heap (`analysis.spool`).
             self.next_sleep = None
-            if self.sleep is not None and self.sleep_next:
+            if self.sleep is not None and self.edges >= SLEEP_MIN_DEGREE * base:
                 # sparse rows cost time (Peterson-PT-3: a tenth of the search); they pay
                 # where layers are wide against the store (SharedMemory-PT-000010: a
                 # layer's sleep sets up to 1.7 times the store's bytes, Peterson 0.15)
@@ -1968,7 +1966,7 @@ class _Explorer:
         ``base ...``) with one insertion into the store (see `speculate`); returns the
         next frontier and its first state number, or None when the layer is to be
         expanded by blocks instead (nothing was stored)."""
-        self.sleep_next = False
+        self.next_sleep = None  # (its levels compute no sleep sets)
         spec = self.speculate(cols, base)
         if spec is None:
             return None
@@ -2031,6 +2029,12 @@ class _Explorer:
             # Small steps until the reduction is judged, so it is judged on the sample.
             size = min(size, max(256, POR_SAMPLE - self.choice_markings))
         return size
+
+    @property
+    def sleep_next(self) -> bool:
+        """Whether the layer being expanded computes the next one's sleep sets (into
+        `next_sleep`)."""
+        return self.next_sleep is not None
 
     @property
     def edges_per_state(self) -> float:

@@ -73,7 +73,7 @@ def test_read_segments_are_released(monkeypatch: pytest.MonkeyPatch) -> None:
     assert queue.mapped_bytes == 0
 
 
-def test_sparse_rows_keep_only_nonzero_words(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_sparse_rows_keep_only_nonzero_words() -> None:
     queue = RowSpool(8)
     rows = np.zeros((4096, 8), dtype=np.uint64)
     rows[:, 3] = 5  # one nonzero word in eight
