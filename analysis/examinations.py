@@ -873,7 +873,7 @@ class QuerySession:
         marking is reachable; ``None`` when it cannot (a solution of the equation is
         not a deadlock, so it never gives TRUE), or the time left would not build its
         constraints (`STATE_EQUATION_SECONDS_PER_ARC`; building checks the budget too)."""
-        arcs = sum(len(t.inputs) + len(t.outputs) for t in self.net.transitions)
+        arcs = self.net.arc_count
         left = self.remaining()
         if self.out_of_time() or (
             left is not None and arcs * STATE_EQUATION_SECONDS_PER_ARC > left

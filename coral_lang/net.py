@@ -335,6 +335,12 @@ class Net:
         a report on a wide net asks thousands of times)."""
         return tuple(p.name for p in self.places)
 
+    @functools.cached_property
+    def arc_count(self) -> int:
+        """Input plus output arcs of all transitions: what the costs of several analyses
+        are estimated from before they start."""
+        return sum(len(t.inputs) + len(t.outputs) for t in self.transitions)
+
     # -- markings -----------------------------------------------------------------------
 
     def initial_marking(self) -> tuple[int, ...]:
