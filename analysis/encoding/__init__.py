@@ -22,7 +22,9 @@ One module per piece; this package re-exports their public names, so
   (11 per Peterson marking instead of 244 place counts).
 * `analysis.encoding.keystore` — `KeyStore`: the packed keys in discovery order plus an
   open-addressing hash table of them, with batch insertion vectorised over whole
-  frontiers.
+  frontiers; `analysis.encoding.slots` — `SlotTable`, that table's slots (3 bytes
+  each while it is small enough); `analysis.encoding.reserved` — zeroed memory
+  reserved up front for arrays that grow.
 """
 
 from analysis.encoding.bounds import UNBOUNDED, invariant_place_bounds
@@ -52,7 +54,6 @@ from analysis.encoding.keystore import (
     FILL_CHUNK,
     MAX_LOAD,
     PROBE_WINDOW_BELOW,
-    RESERVE_BYTES,
     RESERVE_LIMIT,
     WIDE_KEYS,
     Added,
@@ -64,6 +65,8 @@ from analysis.encoding.keystore import (
     word_multipliers,
 )
 from analysis.encoding.layout import FieldGroup, FieldNet, Layout, row_dtype
+from analysis.encoding.reserved import RESERVE_BYTES
+from analysis.encoding.slots import THREE_BYTE_SLOTS, SlotTable
 
 __all__ = [
     "BATCH_LOAD",
@@ -81,6 +84,7 @@ __all__ = [
     "SEARCH_PLACES",
     "SEARCH_ROWS",
     "SEARCH_SECONDS",
+    "THREE_BYTE_SLOTS",
     "UNBOUNDED",
     "WIDE_KEYS",
     "Added",
@@ -98,6 +102,7 @@ __all__ = [
     "Layout",
     "PackedRows",
     "PresetGroup",
+    "SlotTable",
     "first_occurrences",
     "invariant_place_bounds",
     "one_hot_components",

@@ -5,7 +5,6 @@ Part of `analysis.encoding`; see its docstring for how the pieces fit."""
 
 from __future__ import annotations
 
-import mmap
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -15,6 +14,8 @@ import numpy.typing as npt
 
 from analysis.allocator import release_free_heap
 from analysis.encoding.compact import BoolArray, IntArray, KeyArray
+from analysis.encoding.reserved import reserved
+from analysis.encoding.slots import SlotTable
 
 # -- hashing -----------------------------------------------------------------------------
 
@@ -35,11 +36,11 @@ BATCH_LOAD = 0.75
 GROWTH = 1.5
 """Factor by which a full table grows: with slots of 4 bytes and the load kept between
 ``MAX_LOAD / GROWTH`` and ``MAX_LOAD``, the table costs 6.7-10 bytes per state (doubling
-would cost up to 13.3)."""
+would cost up to 13.3); 5-7.5 with the 3-byte slots of tables up to 2^23 slots."""
 
 _S1, _S27, _S29, _S30, _S31, _S32 = (np.uint64(k) for k in (1, 27, 29, 30, 31, 32))
 
-FILL_CHUNK = 1 << 16
+FILL_CHUNK = 1 << 15
 """Keys placed per step when a table is rebuilt (bounds its temporaries). The last
 rebuild comes when the store is near its largest, so its temporaries add to the peak:
 2^18 keys took 12-16 MB of them (FMS-PT-00005: 26.7 resident bytes per state against
@@ -51,7 +52,7 @@ TRIM_GROWTH_BYTES = 1 << 22
 largest, so what the heap keeps free then adds to the search's peak (DoubleExponent-PT-003:
 10 MB, 4 resident bytes per state)."""
 
-PROBE_WINDOW_BELOW = 8192
+PROBE_WINDOW_BELOW = 4096
 """Probe batches up to this size look at `_WINDOW` consecutive slots per round."""
 
 _WINDOW = np.arange(8, dtype=np.int64)
@@ -191,7 +192,7 @@ class Growable:
     than writing it), so growing within the reservation never copies or re-touches."""
 
     def __init__(self, tail: tuple[int, ...], dtype: npt.DTypeLike, reserve: int) -> None:
-        self._data: npt.NDArray[Any] = _reserved((reserve, *tail), dtype)
+        self._data: npt.NDArray[Any] = reserved((reserve, *tail), dtype)
         self.size = 0
 
     @property
@@ -241,37 +242,6 @@ class Growable:
 
 RESERVE_LIMIT = 1 << 26
 """Most states a store reserves address space for up front (beyond, it doubles)."""
-
-RESERVE_BYTES = 1 << 30
-"""Most bytes of address space one reserved array takes (wide keys reserve fewer
-rows), so a reservation never approaches what the kernel would refuse."""
-
-
-MAPPED_BYTES = 1 << 20
-"""Reservations from this size on are anonymous memory maps of their own."""
-
-
-def _reserved(shape: tuple[int, ...], dtype: npt.DTypeLike) -> npt.NDArray[Any]:
-    """Zeroed memory for up to ``shape[0]`` rows, fewer past `RESERVE_BYTES` or when the
-    address space is refused (callers grow past it anyway)."""
-    row = max(1, int(np.prod(shape[1:], dtype=np.int64)) * np.dtype(dtype).itemsize)
-    rows = max(1, min(shape[0], RESERVE_BYTES // row))
-    if rows * row >= MAPPED_BYTES:
-        try:
-            # Pages of its own, returned to the kernel when the array is freed: a block
-            # from the C heap (glibc serves blocks below its mmap threshold, up to 32 MB,
-            # from there) would be zeroed by writing it when it reuses freed memory,
-            # making the whole reservation resident at once.
-            mapped = mmap.mmap(-1, rows * row)
-            flat = np.frombuffer(mapped, dtype=np.uint8)
-            return flat.view(dtype).reshape((rows, *shape[1:]))
-        except (OSError, ValueError, MemoryError):
-            pass
-    try:
-        return np.zeros((rows, *shape[1:]), dtype=dtype)
-    except MemoryError:
-        return np.zeros((min(rows, 1 << 12), *shape[1:]), dtype=dtype)
-
 
 _PLANES: dict[int, tuple[int, ...]] = {
     1: (1,),
@@ -476,16 +446,17 @@ class KeyStore:
     """Packed markings in discovery order plus an open-addressing set of them.
 
     ``keys[i]`` is the packed marking of state ``i``. The table holds nothing but state
-    numbers: one slot (4 bytes, 8 with ``wide_index``) is ``EMPTY`` or a state number
-    plus one, and a probe compares the candidate with the stored key it points to. This
-    costs one more memory access per probe than keeping a copy of the key (or a tag) in
-    the slot, but a third of the memory of the 12-byte tag-and-number slots it replaced,
+    numbers: one slot (`SlotTable`: 3 bytes up to 2^23 slots, then 4, 8 with
+    ``wide_index``) is ``EMPTY`` or a state number plus one, and a probe compares the
+    candidate with the stored key it points to. This costs one more memory access per
+    probe than keeping a copy of the key (or a tag) in the slot, but a quarter of the
+    memory of the 12-byte tag-and-number slots it replaced,
     and the table needs no copy of the keys at all: it is rebuilt from ``keys`` when it
     grows. Slots are probed linearly from a hash of the key (mapped onto a table of
     any size by multiply-shift, so it grows by `GROWTH`, not 2); inserts are vectorised
     over whole batches, equal keys in one batch resolved in the table (their slots hold
     minus one minus the candidate's position until the batch is numbered). The table
-    lives in a prefix of a buffer reserved for ``reserve`` states and grows in place
+    lives in a prefix of buffers reserved for ``reserve`` states and grows in place
     (see `Growable` for why).
     """
 
@@ -498,10 +469,9 @@ class KeyStore:
         word_bytes: Sequence[int] | None = None,
     ) -> None:
         self.n_words = n_words
-        self._index_type = np.int64 if wide_index else np.int32
         reserve = min(max(capacity, reserve or 0), RESERVE_LIMIT)
         self._keys = PackedRows(_word_bytes(n_words, word_bytes), reserve)
-        self._buffer = _reserved((int(reserve / MAX_LOAD) + 16,), self._index_type)
+        self._table = SlotTable(int(reserve / MAX_LOAD) + 16, wide_index)
         self._use_table(max(16, int(capacity / MAX_LOAD) + 1))
 
     @classmethod
@@ -530,7 +500,7 @@ class KeyStore:
     @property
     def nbytes(self) -> int:
         """Bytes of the stored keys and of the table in use."""
-        return int(self._keys.nbytes + self._index.nbytes)
+        return int(self._keys.nbytes + self._table.nbytes)
 
     def rekey(self, keys: KeyArray, word_bytes: Sequence[int] | None = None) -> None:
         """Replace every stored key by ``keys`` (same states, same order, a new packing,
@@ -573,11 +543,7 @@ class KeyStore:
         slots = self._slots
         while self.size + more > MAX_LOAD * slots:
             slots = self._grown(slots)
-        if slots > self._slots:
-            item = self._buffer.itemsize
-            extra = slots if slots > self._buffer.size else slots - self._slots
-            total += extra * item
-        return total
+        return total + self._table.growth_bytes(slots)
 
     # -- slots -----------------------------------------------------------------------
 
@@ -631,7 +597,7 @@ class KeyStore:
     def _resize(self, slots: int) -> None:
         """A table of ``slots`` slots, rebuilt from the stored keys a chunk at a time
         (bounded temporaries; the old table's pages are reused, not copied)."""
-        self._index[:] = EMPTY  # pages already touched; the rest of a buffer is still zero
+        self._table.clear()
         self._use_table(slots)
         for start in range(0, self.size, FILL_CHUNK):
             part = self._keys.words(start, start + FILL_CHUNK)
@@ -639,13 +605,10 @@ class KeyStore:
             self._place(self._home(part), ids)
 
     def _use_table(self, slots: int) -> None:
-        """Make the table the first ``slots`` slots of the buffer (a new, larger buffer
-        if it is too small)."""
-        if slots > self._buffer.size:
-            self._buffer = np.zeros(0, dtype=self._index_type)  # freed before the next
-            self._buffer = np.zeros(slots, dtype=self._index_type)
+        """Make the table the first ``slots`` slots of its buffers (new ones if they are
+        too small or too narrow, see `SlotTable`)."""
+        self._table.use(slots)
         self._slots = slots
-        self._index = self._buffer[:slots]
 
     def _fill(self, slots: IntArray, ids: IntArray) -> None:
         """Place distinct keys into an empty table at once: in home-slot order, linear
@@ -665,7 +628,7 @@ class KeyStore:
             inside = position < size
             rest = part[~inside]
             part, position = part[inside], position[inside]
-            self._index[position] = ids.take(part) + 1
+            self._table.put(position, ids.take(part) + 1)
             if rest.size:  # after the others: they wrap around to the first free slots
                 self._place(slots.take(rest), ids.take(rest))
 
@@ -679,22 +642,22 @@ class KeyStore:
         while need > load * slots:
             slots = self._grown(slots)
         if slots != self._slots:
-            if (slots - self._slots) * self._buffer.itemsize >= TRIM_GROWTH_BYTES:
+            if self._table.growth_bytes(slots) >= TRIM_GROWTH_BYTES:
                 release_free_heap()  # (the table's new pages come on top of the heap's)
             self._resize(slots)
 
     def _place(self, slots: IntArray, ids: IntArray) -> None:
         """Write pairwise distinct keys (by home slot) that are not in the table yet, as
         states ``ids``."""
-        index = self._index
-        values = (ids + 1).astype(self._index_type)
+        table = self._table
+        values = ids + 1
         slots = slots.copy()
         while slots.size:
-            free = np.flatnonzero(index.take(slots) == EMPTY)
+            free = np.flatnonzero(table.take(slots) == EMPTY)
             fs, fv = slots.take(free), values.take(free)
-            index[fs] = fv
+            table.put(fs, fv)
             placed = np.zeros(slots.size, dtype=bool)
-            placed[free] = index.take(fs) == fv
+            placed[free] = table.take(fs) == fv
             more = np.flatnonzero(~placed)
             slots = slots.take(more)
             slots += 1
@@ -727,11 +690,11 @@ class KeyStore:
         consecutive slots at once (fewer rounds, fewer numpy calls); large ones at one
         (less work per candidate)."""
         if slots.size > PROBE_WINDOW_BELOW:
-            content = self._index.take(slots)
+            content = self._table.take(slots)
             return self._matches(content, which, cand), content == EMPTY, slots
         window = slots[:, None] + _WINDOW
         self._wrap(window)
-        contents = self._index.take(window)
+        contents = self._table.take(window)
         wide = np.repeat(which, _WINDOW.size)
         hits = self._matches(contents.reshape(-1), wide, cand).reshape(contents.shape)
         stops = contents == EMPTY
@@ -763,7 +726,7 @@ class KeyStore:
         while pos.size:
             hit, free, at = self._probe(slots, pos, flat)
             where = np.flatnonzero(hit)
-            out[pos.take(where)] = self._index.take(at.take(where)).astype(np.int64) - 1
+            out[pos.take(where)] = self._table.take(at.take(where)).astype(np.int64) - 1
             stopped = hit | free
             more = np.flatnonzero(~stopped)
             slots = self._onward(at, stopped, more)
@@ -818,7 +781,7 @@ class KeyStore:
         m = cand.shape[0]
         flat = self._flat(cand)
         slots = self._home(cand)
-        index = self._index
+        table = self._table
         final = np.empty(m, dtype=np.int64) if want_ids else None
         pos = np.arange(m, dtype=np.int64)
         claimed: list[IntArray] = []
@@ -838,18 +801,18 @@ class KeyStore:
             slots = self._onward(at, stopped, more)
             pos = pos.take(more)
         new_slots = np.concatenate(claimed) if claimed else np.zeros(0, dtype=np.int64)
-        reps = -1 - index.take(new_slots).astype(np.int64)
+        reps = -1 - table.take(new_slots).astype(np.int64)
         is_first = np.zeros(m, dtype=bool)
         is_first[reps] = True
         first = np.flatnonzero(is_first)
         slot_of = np.empty(m, dtype=np.int64)
         slot_of[reps] = new_slots
         need = self.size + first.size
-        index[slot_of.take(first)] = np.arange(self.size + 1, need + 1, dtype=np.int64)
+        table.put(slot_of.take(first), np.arange(self.size + 1, need + 1, dtype=np.int64))
         self._keys.append(cand.take(first, axis=0))
         if final is None:
             return first, None
-        return first, index.take(final).astype(np.int64) - 1
+        return first, table.take(final).astype(np.int64) - 1
 
     def _claim_free(self, cand: npt.NDArray[np.uint64], fp: IntArray, fs: IntArray) -> BoolArray:
         """Candidates ``fp`` (batch positions) found free slots ``fs``: each slot gets
@@ -857,15 +820,7 @@ class KeyStore:
         and the claimants with the representative's key are its repeats. Returns which
         candidates are settled (representative or repeat); sets ``self._reps`` to the
         slots that got a representative."""
-        index = self._index
-        # Several candidates may claim one slot: written in reverse, so the smallest
-        # position normally writes last and wins (checked below, never assumed).
-        refs = (-1 - fp).astype(self._index_type)
-        index[fs[::-1]] = refs[::-1]
-        rep = -1 - index.take(fs).astype(np.int64)
-        if (rep > fp).any():  # numpy assigned repeats in another order
-            np.maximum.at(index, fs, refs)
-            rep = -1 - index.take(fs).astype(np.int64)
+        rep = self._table.claim(fs, fp)  # (several candidates may claim one slot)
         settled = _same(cand.take(fp, axis=0), cand.take(rep, axis=0))
         self._reps = fs.compress(rep == fp)
         return settled

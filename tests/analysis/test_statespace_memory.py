@@ -62,7 +62,7 @@ def test_free_heap_is_given_back_before_the_table_grows(
     resize = keystore.KeyStore._resize
 
     def recorded(self: keystore.KeyStore, slots: int) -> None:
-        growths.append((slots - self._slots) * self._buffer.itemsize)
+        growths.append(self._table.growth_bytes(slots))
         resize(self, slots)
 
     calls: list[int] = []
