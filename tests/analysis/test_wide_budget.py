@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 
 import analysis.pipeline as pipeline
 import analysis.statespace as statespace
+import analysis.symbolic.explore as symbolic_explore
 import analysis.verify as verify_module
 from analysis.budget import Budget
 from analysis.coverability import coverability, node_cap
@@ -26,6 +27,7 @@ from analysis.pipeline import CheckOptions, check_file
 from analysis.report import Verdict
 from analysis.statespace import StateSpace, explore
 from analysis.symbolic.encoding import force
+from analysis.symbolic.explore import SymbolicLimits, explore_symbolic
 from analysis.verify import VerifyOptions, run_verification
 from coral_lang.pnml import write_pnml
 from tests.analysis.test_budget import FakeClock
@@ -177,6 +179,65 @@ def test_a_whole_check_whose_explorer_set_up_outlasts_the_limit_says_so(
     for result in report.properties:
         assert result.verdict is Verdict.INCONCLUSIVE, result
         assert "time limit of 5 s reached" in result.detail, result
+
+
+SYMBOLIC_STAGES = {
+    "invariant_facts": "ordering the places",
+    "place_order": "ordering the levels",
+    "level_order": "the transitions' steps",
+    "MddSaturation": "the transitions' steps",
+}
+"""The decision diagrams' set-up in order, and the stage the budget stops when the one
+named "takes" longer than the budget (its reason says which)."""
+
+
+@pytest.mark.parametrize("slow", list(SYMBOLIC_STAGES))
+def test_the_decision_diagrams_set_up_stops_when_the_budget_is_spent(
+    slow: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """As for the explorer: a stage of the diagrams' set-up that "takes" 2 s of a 1 s
+    budget is the last one started (`place_order` once), and the result is incomplete
+    with the limit and the stage as its reason, not an exception."""
+    clock = FakeClock(0.001)
+    started: list[str] = []
+    done: list[float] = []
+    for name in SYMBOLIC_STAGES:
+        stage = getattr(symbolic_explore, name)
+
+        def timed(*args: Any, _stage: Any = stage, _name: str = name, **kwargs: Any) -> Any:
+            started.append(_name)
+            if _name == slow:
+                clock.now += 2.0
+            result = _stage(*args, **kwargs)
+            if _name == slow:
+                done.append(clock.now)
+            return result
+
+        monkeypatch.setattr(symbolic_explore, name, timed)
+    result = explore_symbolic(rings(20, 10), SymbolicLimits(budget=Budget(1.0, clock=clock)))
+    names = list(SYMBOLIC_STAGES)
+    assert started == names[: names.index(slow) + 1]
+    assert not result.complete and result.states == 0
+    assert result.reason == f"time limit of 1 s reached (setting up: {SYMBOLIC_STAGES[slow]})"
+    assert clock.now - done[0] <= MARGIN_S
+
+
+def test_the_decision_diagrams_order_the_places_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Node saturation hands over at once here (every net counts as testing too many
+    levels), and the set-level schedule takes over with the same order of places:
+    `place_order` runs once (it ran for each)."""
+    calls: list[int] = []
+    order = symbolic_explore.place_order  # type: ignore[attr-defined]
+
+    def counted(net: Any) -> list[int]:
+        calls.append(1)
+        return order(net)
+
+    monkeypatch.setattr(symbolic_explore, "place_order", counted)
+    monkeypatch.setattr(symbolic_explore, "WIDE_TESTS", 0)
+    result = explore_symbolic(rings(3, 4))
+    assert result.complete and result.states == 4**3
+    assert len(calls) == 1
 
 
 def test_a_wide_node_reads_the_budget_between_its_children() -> None:
