@@ -419,6 +419,8 @@ class _Checker:
 
         left = self.budget.remaining()
         budget = self.budget.child(seconds=None if left is None else left * share)
+        if left is not None:  # its reason names the limit the user set, not the share
+            budget.limit = self.budget.limit
         return explore_symbolic(self.net, SymbolicLimits(budget=budget))
 
     @property
@@ -476,6 +478,8 @@ class _Checker:
         text = f"the state space is incomplete ({self.space.stopped_reason})"
         if self.symbolic_skipped:
             text += f"; {self.symbolic_skipped}"
+        elif self.symbolic is not None and not self.symbolic.complete:
+            text += f"; decision diagrams stopped: {self.symbolic.reason}"
         return text
 
     def _witness(self, state: int) -> Evidence:

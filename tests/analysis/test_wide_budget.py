@@ -222,6 +222,29 @@ def test_the_decision_diagrams_set_up_stops_when_the_budget_is_spent(
     assert clock.now - done[0] <= MARGIN_S
 
 
+def test_a_verdict_says_which_limit_stopped_the_decision_diagrams(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``--method symbolic`` on a clock where the invariants "take" 6 s of a 5 s limit:
+    the verdicts the diagrams would have decided name the command's limit (not the
+    diagrams' share of it) and where their set-up stopped."""
+    clock = FakeClock(0.001)
+    facts = symbolic_explore.invariant_facts  # type: ignore[attr-defined]
+
+    def slow(*args: Any, **kwargs: Any) -> Any:
+        clock.now += 6.0
+        return facts(*args, **kwargs)
+
+    monkeypatch.setattr(symbolic_explore, "invariant_facts", slow)
+    options = VerifyOptions(time_limit=5.0, method="symbolic", structural=False)
+    report = run_verification(rings(20, 10), options, budget=Budget(clock=clock)).report
+    detail = report.property("bounded").detail
+    stopped = (
+        "decision diagrams stopped: time limit of 5 s reached (setting up: ordering the places)"
+    )
+    assert stopped in detail, detail
+
+
 def test_the_decision_diagrams_order_the_places_once(monkeypatch: pytest.MonkeyPatch) -> None:
     """Node saturation hands over at once here (every net counts as testing too many
     levels), and the set-level schedule takes over with the same order of places:
