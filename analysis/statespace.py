@@ -2274,8 +2274,10 @@ def explore(
         max_states: stop after storing this many markings (``None``: no limit; an
             unbounded net then runs until its token counts pass ``2**60``).
         budget: its clock times the search and its deadline stops it (checked after
-            every chunk; ``None``: no time limit, on the real clock); its work cap, if
-            any, is a state cap too (the smaller of it and ``max_states`` applies).
+            every chunk, and between the parts of the set-up: spent there, the space
+            is the initial marking alone; ``None``: no time limit, on the real clock);
+            its work cap, if any, is a state cap too (the smaller of it and
+            ``max_states`` applies).
         por: explore a stubborn-set reduced graph instead (`analysis.stubborn`): all
             deadlocks are kept; ``states``/``edges`` then count the reduced graph.
         visible: with ``por``, places a reachability question is about; the reduced
