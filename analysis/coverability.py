@@ -25,6 +25,7 @@ still reported unbounded (the tree proves it), listed in ``missing_pumps``.
 
 from __future__ import annotations
 
+import weakref
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -148,22 +149,44 @@ class _Node:
     pumps: list[tuple[int, tuple[int, ...]]] = field(default_factory=list)
 
 
+_Arcs = list[list[tuple[int, int]]]
+
+
+def _arcs_of(net: Net) -> tuple[_Arcs, _Arcs, list[list[int]], list[int]]:
+    """Per transition its input and output arcs as (place number, weight), per place the
+    transitions that take from it, and the transitions without inputs. Only a
+    transition whose input places are all marked can fire: a node looks at the
+    consumers of its marked places (and the transitions without inputs), so a node
+    costs what it marks, not the width of the net.
+
+    The last net's are kept, read-only (the quick tree and the full one are grown on
+    the same net, and on 20,000 transitions these lists took 0.07-0.2 s, the full
+    tree's start often past the command's limit)."""
+    cached = _ARCS.get(id(net))
+    if cached is not None and cached[0]() is net:
+        return cached[1]
+    inputs = [[(net.place_index(p), w) for p, w in t.inputs] for t in net.transitions]
+    outputs = [[(net.place_index(p), w) for p, w in t.outputs] for t in net.transitions]
+    consumers: list[set[int]] = [set() for _ in net.places]
+    for t, arcs in enumerate(inputs):
+        for p, _ in arcs:
+            consumers[p].add(t)
+    sources = [t for t, arcs in enumerate(inputs) if not arcs]
+    found = (inputs, outputs, [sorted(c) for c in consumers], sources)
+    _ARCS.clear()
+    _ARCS[id(net)] = (weakref.ref(net), found)
+    return found
+
+
+_ARCS: dict[int, tuple[weakref.ref[Net], tuple[_Arcs, _Arcs, list[list[int]], list[int]]]] = {}
+
+
 class _Tree:
     """The Karp-Miller tree over ω-markings, built breadth first."""
 
     def __init__(self, net: Net) -> None:
         self.net = net
-        self.inputs = [[(net.place_index(p), w) for p, w in t.inputs] for t in net.transitions]
-        self.outputs = [[(net.place_index(p), w) for p, w in t.outputs] for t in net.transitions]
-        # Only a transition whose input places are all marked can fire: a node looks at
-        # the consumers of its marked places (and the transitions without inputs), so a
-        # node costs what it marks, not the width of the net.
-        consumers: list[set[int]] = [set() for _ in net.places]
-        for t, arcs in enumerate(self.inputs):
-            for p, _ in arcs:
-                consumers[p].add(t)
-        self.consumers = [sorted(c) for c in consumers]
-        self.sources = [t for t, arcs in enumerate(self.inputs) if not arcs]
+        self.inputs, self.outputs, self.consumers, self.sources = _arcs_of(net)
         start = net.initial_marking()
         self.nodes = [_Node(start, -1, -1)]
         # node markings, ω as _BIG; none when M0 itself is too large (build stops at once)
@@ -352,7 +375,12 @@ def node_cap(max_nodes: int, net: Net, cells: int) -> int:
 
 
 SUMMARY_BLOCK = 512
-"""Tree nodes read into one array by `_summarise` (a few MB on wide nets)."""
+"""Most tree nodes read into one array by `_summarise`."""
+
+SUMMARY_CELLS = 1 << 20
+"""Most place values of one `_summarise` block (8 MB): blocks of 512 nodes of 20,000
+places were 80 MB arrays, freshly mapped each time, and summarising 1,000 nodes took
+0.4 s after the tree's time was up; in blocks of this size, 0.03 s."""
 
 
 def _summarise(
@@ -370,13 +398,14 @@ def _summarise(
     if n_places == 0:  # a mission with no places: nothing to summarise
         return first_omega, top.tolist()
     numeric = len(rows) == len(nodes)
-    for start in range(0, len(nodes), SUMMARY_BLOCK):
+    size = max(1, min(SUMMARY_BLOCK, SUMMARY_CELLS // n_places))
+    for start in range(0, len(nodes), size):
         if numeric:
-            block = np.stack(rows[start : start + SUMMARY_BLOCK])
+            block = np.stack(rows[start : start + size])
             omega = block >= _BIG
         else:
             block = np.array(
-                [node.marking for node in nodes[start : start + SUMMARY_BLOCK]], dtype=np.int64
+                [node.marking for node in nodes[start : start + size]], dtype=np.int64
             ).reshape(-1, n_places)
             omega = block == OMEGA
         top = np.maximum(top, np.where(omega, 0, block).max(axis=0, initial=0))

@@ -1094,6 +1094,15 @@ class _EnablingBits:
         return unpacked[: self.n_t]
 
 
+class SetupStopped(Exception):
+    """The budget was spent before the explorer's set-up was done; ``stage`` names the
+    part it was about to start."""
+
+    def __init__(self, stage: str) -> None:
+        super().__init__(stage)
+        self.stage = stage
+
+
 class _Explorer:
     """The mutable state of one exploration; `explore` is its only user.
 
@@ -1124,17 +1133,27 @@ class _Explorer:
         small = max_states is not None and max_states < np.iinfo(np.int32).max // 2
         self.index_type = np.int32 if small else np.int64
         self.via_type = _via_type(cn.n_transitions)
+        # The set-up reads the budget between its stages (on a net of 20,000 places
+        # and transitions they took 0.1-0.5 s each): once it is spent the search is
+        # not started (`SetupStopped`, see `_explore`).
+        self.setup_check("finding one-hot components")
         components = one_hot_components(cn, budget)
         covered = sum(int(c.places.size) for c in components)
         # (the bounds only size count fields: none when components take every place)
-        bounds = invariant_place_bounds(cn, budget) if covered < cn.n_places else None
+        bounds = None
+        if covered < cn.n_places:
+            self.setup_check("bounding places by invariants")
+            bounds = invariant_place_bounds(cn, budget)
+        self.setup_check("laying out the keys")
         layout = Layout.initial_guess(cn, components, bounds)
         self.fnet = fnet = FieldNet(cn, layout)
+        self.setup_check("indexing enabling")
         self.index = _EnablingIndex(fnet, layout, cn.n_transitions)
         self.bits: _EnablingBits | None = None
         self.bit_fired = 0  # edges listed by `bit_edges`, and the markings it expanded
         self.bit_sources = 0
         if not self.index.looked_up and cn.n_transitions <= 64 * SLEEP_WORDS:
+            self.setup_check("tabling enabling")
             bits = _EnablingBits(fnet, cn.n_transitions)
             if bits.feasible:
                 self.bits = bits
@@ -1151,6 +1170,7 @@ class _Explorer:
         self.self_loops = np.flatnonzero(cn.self_loops)
         self.count_fields = np.flatnonzero(~fnet.onehot)
         self.onehot_fields = np.flatnonzero(fnet.onehot)
+        self.setup_check("computing key deltas")
         self._set_layout(layout)
         self.widenings = np.zeros(cn.n_places, dtype=np.int64)  # per place
         self.reserve = min(max_states or DEFAULT_RESERVE, RESERVE_LIMIT)
@@ -1187,12 +1207,20 @@ class _Explorer:
         self.layer_starts = [0]
         self.stopped: str | None = None
         wanted = sleep_sets and reducer is None and cn.n_transitions > 1
+        if wanted:
+            self.setup_check("computing sleep sets")
         self.sleep = SleepSets(cn) if wanted else None
         self.next_sleep: RowSpool | None = None  # while a layer computes the next one's
         self.choice_markings = 0  # POR: markings with a choice seen, firings kept of them
         self.choice_enabled = 0
         self.choice_fired = 0
         self.reduction_note: str | None = None
+
+    def setup_check(self, stage: str) -> None:
+        """Raise `SetupStopped` naming ``stage`` (what was about to start) when the
+        budget is spent."""
+        if self.budget.expired():
+            raise SetupStopped(stage)
 
     def _set_layout(self, layout: Layout) -> None:
         cn, fnet = self.cn, self.fnet
@@ -2259,8 +2287,10 @@ def explore(
         max_states: stop after storing this many markings (``None``: no limit; an
             unbounded net then runs until its token counts pass ``2**60``).
         budget: its clock times the search and its deadline stops it (checked after
-            every chunk; ``None``: no time limit, on the real clock); its work cap, if
-            any, is a state cap too (the smaller of it and ``max_states`` applies).
+            every chunk, and between the parts of the set-up: spent there, the space
+            is the initial marking alone; ``None``: no time limit, on the real clock);
+            its work cap, if any, is a state cap too (the smaller of it and
+            ``max_states`` applies).
         por: explore a stubborn-set reduced graph instead (`analysis.stubborn`): all
             deadlocks are kept; ``states``/``edges`` then count the reduced graph.
         visible: with ``por``, places a reachability question is about; the reduced
@@ -2309,6 +2339,43 @@ def explore(
         progress=progress,
         chunk=chunk,
         stop_when=stop_when,
+    )
+
+
+def _unexpanded(
+    cn: CompactNet, budget: Budget, stage: str, start: float, reduced: bool
+) -> StateSpace:
+    """The state space of a search whose budget ran out in the explorer's set-up: the
+    initial marking alone, stored but not expanded, in one count field per place;
+    the reason names the limit in the one shape of every stopped search (``time limit
+    of 1 s reached after 1 state``). ``stage``: what the set-up was about to start."""
+    del stage  # (kept by `SetupStopped` for tests and debugging; not part of the reason)
+    initial = cn.initial.astype(np.int64)
+    layout = Layout.for_bits([max(1, int(v).bit_length()) for v in initial.tolist()])
+    store = KeyStore(layout.n_words, reserve=1, word_bytes=_stored_bytes(layout))
+    store.add(layout.pack(initial[None, :]))
+    via = np.zeros(1, dtype=_via_type(cn.n_transitions))
+    return StateSpace(
+        net=cn.net,
+        states=1,
+        edges=0,
+        place_bounds=initial.copy(),
+        max_tokens_place=int(initial.max(initial=0)),
+        max_tokens_marking=int(initial.sum()),
+        deadlocks=np.zeros(0, dtype=np.int64),
+        fired_transitions=np.zeros(cn.n_transitions, dtype=bool),
+        complete=False,
+        stopped_reason=budget.time_reason(1),
+        seconds=budget.clock() - start,
+        stored_bytes=store.nbytes + via.nbytes,
+        depth=1,
+        reduced=reduced,
+        layout=layout,
+        keys=store.keys,
+        store=store,
+        key_delta=np.zeros((cn.n_transitions, layout.n_words), dtype=np.uint64),
+        via=via,
+        layer_starts=np.zeros(1, dtype=np.int64),
     )
 
 
@@ -2384,7 +2451,13 @@ def _explore(
         vis = None if visible is None else [cn.net.place_index(p) for p in visible]
         reducer = StubbornSets(cn, vis)
     settle_allocator()
-    explorer = _Explorer(cn, max_states, budget, reducer, progress, chunk, sleep_sets=sleep_sets)
+    start = budget.clock()
+    try:
+        explorer = _Explorer(
+            cn, max_states, budget, reducer, progress, chunk, sleep_sets=sleep_sets
+        )
+    except SetupStopped as stop:
+        return _unexpanded(cn, budget, stop.stage, start, por)
     explorer.stop_when = stop_when
     try:
         explorer.run()

@@ -24,6 +24,7 @@ from types import MappingProxyType
 
 from coral_lang.diagnostics import CoralError, Span
 from coral_lang.formula import Formula
+from coral_lang.gcpause import cyclic_gc_paused
 
 
 class PlaceKind(enum.Enum):
@@ -542,8 +543,14 @@ class Net:
 
     def digest(self) -> str:
         """SHA-256 of the canonical form: ``sha256:<hex>``. Stable across runs and
-        platforms, independent of declaration order and source positions."""
-        blob = json.dumps(self.canonical(), sort_keys=True, separators=(",", ":"))
+        platforms, independent of declaration order and source positions.
+
+        The canonical form of a wide net is hundreds of thousands of small lists and
+        dicts, freed as soon as they are dumped: the cyclic collector is paused while
+        they exist (20,000 places after an analysis: 0.20-0.30 s with it, 0.095 s
+        without)."""
+        with cyclic_gc_paused():
+            blob = json.dumps(self.canonical(), sort_keys=True, separators=(",", ":"))
         return "sha256:" + hashlib.sha256(blob.encode()).hexdigest()
 
     def summary(self) -> str:

@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from analysis.budget import Budget
-from analysis.encoding.compact import BoolArray, CompactNet, IntArray
+from analysis.encoding.compact import CompactNet, IntArray, row_entries
 from analysis.encoding.keystore import word_multipliers
 
 # -- one-hot components ------------------------------------------------------------------
@@ -34,32 +34,60 @@ GROW_CLASSES = 1_000
 """Most classes of `_components_by_unit_moves` grown into candidate flows."""
 
 
-def _flow_kind(cn: CompactNet, members: IntArray) -> str | None:
-    """How many tokens the places ``members`` can hold between them, proven on the
-    arcs (integer sums, exact): ``"exact"`` when they hold one initially and every
+def _flow_kinds(cn: CompactNet, candidates: list[IntArray]) -> list[str | None]:
+    """How many tokens each candidate set of places can hold between them, proven on
+    the arcs (integer sums, exact): ``"exact"`` when they hold one initially and every
     transition puts back as many as it takes (a P-invariant: always exactly one),
     ``"at most"`` when none puts back more than it takes (``y.M`` never grows: at most
-    one, in every part of the set too), else ``None``."""
-    if int(cn.initial[members].sum()) != 1:
-        return None
-    inside = np.zeros(cn.n_places, dtype=bool)
-    inside[members] = True
-    took, put = _flow_through(cn, inside)
-    if (put > took).any():
-        return None
-    return "exact" if np.array_equal(put, took) else "at most"
+    one, in every part of the set too), else ``None``. All sets at once: one pass over
+    the arcs for every set, not one per set (2,000 rings: 4,000 passes over 40,000
+    arcs took 0.4 s)."""
+    owner, place = _memberships(candidates)
+    n = len(candidates)
+    tokens = np.bincount(owner, weights=cn.initial[place], minlength=n)
+    keys, took, put = _flows_through(cn, owner, place)
+    by = keys // max(1, cn.n_transitions)
+    grows = np.bincount(by[put > took], minlength=n) > 0
+    uneven = np.bincount(by[put != took], minlength=n) > 0
+    kinds: list[str | None] = []
+    for k in range(n):
+        if tokens[k] != 1 or grows[k]:
+            kinds.append(None)
+        else:
+            kinds.append("at most" if uneven[k] else "exact")
+    return kinds
 
 
-def _flow_through(cn: CompactNet, inside: BoolArray) -> tuple[npt.NDArray[Any], ...]:
-    """Per transition, the tokens it takes from and puts into the places ``inside``."""
-    n_t = cn.n_transitions
-    took = np.bincount(
-        cn.inputs.rows, weights=cn.inputs.values * inside[cn.inputs.places], minlength=n_t
-    )
-    put = np.bincount(
-        cn.outputs.rows, weights=cn.outputs.values * inside[cn.outputs.places], minlength=n_t
-    )
-    return took, put
+def _memberships(candidates: list[IntArray]) -> tuple[IntArray, IntArray]:
+    """``(owner, place)``: one pair per member of each candidate set."""
+    sizes = np.fromiter((c.size for c in candidates), dtype=np.int64, count=len(candidates))
+    owner = np.repeat(np.arange(len(candidates), dtype=np.int64), sizes)
+    place = np.concatenate(candidates) if candidates else np.zeros(0, dtype=np.int64)
+    return owner, place.astype(np.int64, copy=False)
+
+
+def _flows_through(
+    cn: CompactNet, owner: IntArray, place: IntArray
+) -> tuple[IntArray, npt.NDArray[Any], npt.NDArray[Any]]:
+    """For the place sets given as ``(owner, place)`` pairs: per (set, transition) pair
+    that moves tokens in or out of the set, its key ``owner * transitions +
+    transition`` (ascending, unique) and the tokens the transition takes from and puts
+    into the set's places."""
+    n_t = max(1, cn.n_transitions)
+    order = np.argsort(place, kind="stable")
+    member_of = owner[order]
+    indptr = np.zeros(cn.n_places + 1, dtype=np.int64)
+    np.cumsum(np.bincount(place, minlength=cn.n_places), out=indptr[1:])
+    counts = np.diff(indptr)
+    sides = []
+    for arcs in (cn.inputs, cn.outputs):
+        arc, member = row_entries(indptr, counts, arcs.places)
+        sides.append((member_of[member] * n_t + arcs.rows[arc], arcs.values[arc]))
+    (k_in, w_in), (k_out, w_out) = sides
+    keys, inverse = np.unique(np.concatenate([k_in, k_out]), return_inverse=True)
+    took = np.bincount(inverse[: k_in.size], weights=w_in, minlength=keys.size)
+    put = np.bincount(inverse[k_in.size :], weights=w_out, minlength=keys.size)
+    return keys, took, put
 
 
 def _components_by_unit_moves(cn: CompactNet) -> list[IntArray]:
@@ -81,7 +109,7 @@ def _components_by_unit_moves(cn: CompactNet) -> list[IntArray]:
     for single in (False, True):
         chosen = feeds[dst] == 1 if single else np.ones(dst.size, dtype=bool)
         classes = _classes(cn.n_places, src[chosen], dst[chosen])
-        candidates += [_grow_flow(cn, c) for c in classes[:GROW_CLASSES]]
+        candidates += _grow_flows(cn, classes[:GROW_CLASSES])
     return candidates
 
 
@@ -106,19 +134,34 @@ def _classes(n: int, a: IntArray, b: IntArray) -> list[IntArray]:
     return sorted((c for c in np.split(order, bounds) if c.size > 1), key=len, reverse=True)
 
 
-def _grow_flow(cn: CompactNet, members: IntArray) -> IntArray:
-    """``members`` plus, a few times over, the input places of the transitions that put
-    more tokens into the set than they take: what a flow containing ``members`` needs
-    (taking more than putting back is fine for an "at most one" flow)."""
-    inside = np.zeros(cn.n_places, dtype=bool)
-    inside[members] = True
+def _grow_flows(cn: CompactNet, classes: list[IntArray]) -> list[IntArray]:
+    """Each class plus, a few times over, the input places of the transitions that put
+    more tokens into the set than they take: what a flow containing the class needs
+    (taking more than putting back is fine for an "at most one" flow). All classes at
+    once (see `_flow_kinds`)."""
+    if not classes:
+        return []
+    n_t = max(1, cn.n_transitions)
+    owner, place = _memberships(classes)
+    active = np.ones(len(classes), dtype=bool)
     for _ in range(3):
-        took, put = _flow_through(cn, inside)
-        grows = put > took
-        if not grows.any():
+        keys, took, put = _flows_through(cn, owner, place)
+        growing = keys[(put > took) & active[keys // n_t]]
+        if not growing.size:
             break
-        inside[cn.inputs.places[grows[cn.inputs.rows]]] = True
-    return np.flatnonzero(inside)
+        active[:] = False
+        active[growing // n_t] = True
+        grower, entry = cn.inputs.expand(growing % n_t)
+        pairs = np.concatenate(
+            [
+                owner * cn.n_places + place,
+                (growing // n_t)[grower] * cn.n_places + cn.inputs.places[entry],
+            ]
+        )
+        pairs = np.unique(pairs)
+        owner, place = pairs // cn.n_places, pairs % cn.n_places
+    bounds = np.searchsorted(owner, np.arange(1, len(classes)))
+    return np.split(place, bounds)
 
 
 def _components_by_elimination(cn: CompactNet, budget: Budget) -> list[IntArray]:
@@ -210,7 +253,8 @@ def one_hot_components(cn: CompactNet, budget: Budget | None = None) -> list[Com
     if cn.n_places * cn.n_transitions <= DENSE_SEARCH_CELLS and cn.n_places <= SEARCH_PLACES:
         search = (budget or Budget()).child(seconds=SEARCH_SECONDS)
         candidates += _components_by_elimination(cn, search)
-    flows = [(c, kind) for c in candidates if (kind := _flow_kind(cn, c)) is not None]
+    kinds = _flow_kinds(cn, candidates)
+    flows = [(c, kind) for c, kind in zip(candidates, kinds, strict=True) if kind is not None]
     flows.sort(key=lambda f: f[0].size, reverse=True)
     used = np.zeros(cn.n_places, dtype=bool)
     chosen: list[Component] = []

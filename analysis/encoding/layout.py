@@ -88,8 +88,16 @@ class Layout:
         word = np.zeros(len(bits), dtype=np.int64)
         shift = np.zeros(len(bits), dtype=np.uint64)
         used: list[int] = []
+        # The first word with room for a width: words before it stay too full for that
+        # width (they only fill up), so the scan resumes there, once per width, and
+        # costs the words once per width instead of once per field (2,000 fields in
+        # 134 words: 0.1 s).
+        first_free: dict[int, int] = {}
         for f in sorted(range(len(bits)), key=lambda f: -bits[f]):
-            w = next((w for w, u in enumerate(used) if u + bits[f] <= 63), len(used))
+            w = first_free.get(bits[f], 0)
+            while w < len(used) and used[w] + bits[f] > 63:
+                w += 1
+            first_free[bits[f]] = w
             if w == len(used):
                 used.append(0)
             word[f], shift[f] = w, used[w]
@@ -386,7 +394,12 @@ class Layout:
             with np.errstate(over="ignore"):
                 contribution = amounts * self.multiplier[arcs.places]
             slot = arcs.rows * self.n_words + self.place_word[arcs.places]
-            np.add.at(out, slot, contribution)
+            # the sums per slot (mod 2**64) by sorting, not `np.add.at`: that took 45 ms
+            # per call on the 40,000 arcs of 2,000 rings
+            order = np.argsort(slot, kind="stable")
+            slot = slot[order]
+            starts = np.flatnonzero(np.diff(slot, prepend=-1))
+            out[slot[starts]] = np.add.reduceat(contribution[order], starts)
         return out.reshape(n_t, self.n_words)
 
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from analysis.budget import Budget
 from coral_lang.net import Net, Transition
 
 FORCE_WORK = 400_000
@@ -35,8 +36,8 @@ def arc_weights(net: Net, tr: Transition) -> tuple[dict[int, int], dict[int, int
 
 def _supports(net: Net) -> list[list[int]]:
     """Each transition's places (inputs and outputs), sorted, by place number; the
-    last net's are kept (`place_order` is asked twice per symbolic run, and on a net
-    of 40,000 arcs building them is a tenth of a second)."""
+    last net's are kept (`place_order` reads them three times, and on a net of 40,000
+    arcs building them is a tenth of a second)."""
     cached = _SUPPORTS.get(id(net))
     if cached is not None and cached[0]() is net:
         return cached[1]
@@ -178,17 +179,21 @@ def invariant_bounds(net: Net, seconds: float) -> list[int | None]:
     return invariant_facts(net, seconds)[0]
 
 
-def invariant_facts(net: Net, seconds: float) -> tuple[list[int | None], list[list[int]]]:
+def invariant_facts(
+    net: Net, seconds: float, budget: Budget | None = None
+) -> tuple[list[int | None], list[list[int]]]:
     """The bounds of `invariant_bounds` and the *units*: disjoint sets of at least two
     places that always hold exactly one token together (a P-invariant of weights 1
     whose initial value is 1), the largest first. A unit is one multi-valued level of
     `analysis.symbolic.mdd` (the place that holds the token), the NUPN units of MCC
-    nets recovered from the net itself."""
-    from analysis.budget import Budget
+    nets recovered from the net itself. The search takes `seconds` of ``budget`` (the
+    caller's, so its clock and deadline; None: a fresh one on the real clock)."""
     from analysis.invariants import invariant_bounds as bounds_of
     from analysis.invariants import p_invariants
 
-    basis = p_invariants(net, budget=Budget(max(0.0, seconds)))
+    seconds = max(0.0, seconds)
+    search = Budget(seconds) if budget is None else budget.child(seconds=seconds)
+    basis = p_invariants(net, budget=search)
     found = bounds_of(net, basis)
     initial = [p.initial for p in net.places]
     candidates = [

@@ -190,7 +190,13 @@ class SymbolicNet:
             max_memory = spare if max_memory is None else min(max_memory, spare)
         if max_memory is not None:
             self.bdd.configure(max_memory=max_memory)
+        # (declaring 40,000 variables and the initial cube take a while on a wide net:
+        # the budget is read before and after each)
+        if deadline is not None:
+            deadline.check()
         self.bdd.declare(*self.enc.declaration())
+        if deadline is not None:
+            deadline.check()
         self.level_of_place = {p: i for i, p in enumerate(self.enc.order)}
         self.xvars = [v for p in self.enc.order for v in self.enc.xs(p)]
         self.initial = self.marking_cube([p.initial for p in net.places], current=True)
@@ -405,21 +411,26 @@ def explore_symbolic(net: Net, limits: SymbolicLimits | None = None) -> Symbolic
     seconds = [INVARIANT_SECONDS]
     if limits.time_limit is not None:
         seconds.append(limits.time_limit)
-    left = limits.budget.remaining() if limits.budget is not None else None
-    if left is not None:
-        seconds.append(left)
-    bounds, units = invariant_facts(net, min(seconds))
+    deadline = _Deadline(limits, start)
+    # The set-up (invariants, the order of places, the levels, the transitions'
+    # steps, the variables) reads the budget between its stages: on rings(2000, 10)
+    # they took 0.1-1 s each, 1.3-2.2 s in all before the first reading.
+    bounds, units = invariant_facts(net, min(seconds), limits.budget)
     bits = initial_bits(net, bounds=bounds)
+    try:
+        deadline.check()
+        order = place_order(net)  # (once: the diagrams of both schedules use it)
+    except _Budget as exc:
+        return _stopped(net, bits, start, f"{exc} (setting up: ordering the places)")
     proven = frozenset(p for p, b in enumerate(bounds) if b is not None)
     conserved_bits = _conserved_bits(net)
-    deadline = _Deadline(limits, start)
     if limits.strategy == "saturation":
-        result = _by_nodes(net, bounds, units, limits, deadline, start)
+        result = _by_nodes(net, bounds, units, order, limits, deadline, start)
         if result is not None:
             return result
     while True:
         try:
-            sym = SymbolicNet(net, bits, limits, deadline, proven)
+            sym = SymbolicNet(net, bits, limits, deadline, proven, order)
             reached, sweeps, peak, reason = _fixpoint(sym, deadline)
             break
         except _Budget as exc:
@@ -506,6 +517,7 @@ def _by_nodes(
     net: Net,
     bounds: list[int | None],
     units: list[list[int]],
+    order: list[int],
     limits: SymbolicLimits,
     deadline: _Deadline,
     start: float,
@@ -518,8 +530,13 @@ def _by_nodes(
     the time left): the caller then runs the set-level schedule, which wins where every
     transition reads the whole net (Dekker-PT-020: 3.8M node images, about 15 s, here;
     2-5 s by sets). A stopped fixpoint has no consistent partial set to
-    count: it reports 0 states."""
-    levels = level_order(net, units, place_order(net))
+    count: it reports 0 states. ``order``: the places' static order (`place_order`)."""
+    bits = initial_bits(net, bounds=bounds)
+    try:
+        deadline.check()
+        levels = level_order(net, units, order)
+    except _Budget as exc:
+        return _stopped(net, bits, start, f"{exc} (setting up: ordering the levels)")
     order = [p for places in levels for p in places]
     top = (1 << limits.max_bits) - 1
     caps = [top if b is None else b for b in bounds]
@@ -535,12 +552,15 @@ def _by_nodes(
         return deadline.reason(nodes * MDD_NODE_WEIGHT)
 
     try:
+        deadline.check()
         run = MddSaturation(net, levels, caps, check)
+        deadline.check()
     except ValueError:  # a unit whose invariant the arcs break: never expected
         return None
+    except _Budget as exc:
+        return _stopped(net, bits, start, f"{exc} (setting up: the transitions' steps)")
     if run.widest_test() >= WIDE_TESTS:
         return None
-    bits = initial_bits(net, bounds=bounds)
     try:
         root = run.run([p.initial for p in net.places])
     except (_GiveUp, RecursionError):
