@@ -90,14 +90,9 @@ def graphviz_available(program: str = "dot") -> bool:
     return shutil.which(program) is not None
 
 
-def arc_count(net: Net) -> int:
-    """Arcs of the drawing: one per place a transition takes from or gives to."""
-    return sum(len(t.inputs) + len(t.outputs) for t in net.transitions)
-
-
 def too_large_for_graphviz(net: Net) -> str:
     """Why ``auto`` does not try Graphviz on ``net`` (empty when it does)."""
-    transitions, arcs = len(net.transitions), arc_count(net)
+    transitions, arcs = len(net.transitions), net.arc_count
     if transitions > AUTO_GRAPHVIZ_MAX_TRANSITIONS:
         return f"{transitions} transitions, over {AUTO_GRAPHVIZ_MAX_TRANSITIONS}"
     if arcs > AUTO_GRAPHVIZ_MAX_ARCS:

@@ -13,7 +13,6 @@ from analysis.netdraw import (
     FORCED_GRAPHVIZ_TIMEOUT_S,
     GRAPHVIZ_TIMEOUT_S,
     MAX_DRAWN_NODES,
-    arc_count,
     draw_net,
     graphviz_available,
     token_text,
@@ -152,7 +151,7 @@ def test_auto_does_not_try_graphviz_on_large_nets(tmp_path: Path) -> None:
         {f"p{i}": 1 for i in range(AUTO_GRAPHVIZ_MAX_ARCS // 10 + 1)},
         {f"t{j}": ({f"p{i}": 1 for i in range(6 + j % 2)}, {"p0": 1}) for j in range(70)},
     )
-    assert arc_count(dense) > AUTO_GRAPHVIZ_MAX_ARCS and len(dense.transitions) <= 80
+    assert dense.arc_count > AUTO_GRAPHVIZ_MAX_ARCS and len(dense.transitions) <= 80
     assert "arcs, over" in too_large_for_graphviz(dense)
 
 
