@@ -25,7 +25,6 @@ still reported unbounded (the tree proves it), listed in ``missing_pumps``.
 
 from __future__ import annotations
 
-import weakref
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -35,6 +34,7 @@ import numpy.typing as npt
 
 from analysis.budget import Budget, stage, work_limit_reason
 from analysis.inputs import legal_trace
+from analysis.lastnet import last_net
 from coral_lang.net import Net
 
 Marking = tuple[int, ...]
@@ -152,6 +152,7 @@ class _Node:
 _Arcs = list[list[tuple[int, int]]]
 
 
+@last_net
 def _arcs_of(net: Net) -> tuple[_Arcs, _Arcs, list[list[int]], list[int]]:
     """Per transition its input and output arcs as (place number, weight), per place the
     transitions that take from it, and the transitions without inputs. Only a
@@ -162,9 +163,6 @@ def _arcs_of(net: Net) -> tuple[_Arcs, _Arcs, list[list[int]], list[int]]:
     The last net's are kept, read-only (the quick tree and the full one are grown on
     the same net, and on 20,000 transitions these lists took 0.07-0.2 s, the full
     tree's start often past the command's limit)."""
-    cached = _ARCS.get(id(net))
-    if cached is not None and cached[0]() is net:
-        return cached[1]
     inputs = [[(net.place_index(p), w) for p, w in t.inputs] for t in net.transitions]
     outputs = [[(net.place_index(p), w) for p, w in t.outputs] for t in net.transitions]
     consumers: list[set[int]] = [set() for _ in net.places]
@@ -172,13 +170,7 @@ def _arcs_of(net: Net) -> tuple[_Arcs, _Arcs, list[list[int]], list[int]]:
         for p, _ in arcs:
             consumers[p].add(t)
     sources = [t for t, arcs in enumerate(inputs) if not arcs]
-    found = (inputs, outputs, [sorted(c) for c in consumers], sources)
-    _ARCS.clear()
-    _ARCS[id(net)] = (weakref.ref(net), found)
-    return found
-
-
-_ARCS: dict[int, tuple[weakref.ref[Net], tuple[_Arcs, _Arcs, list[list[int]], list[int]]]] = {}
+    return inputs, outputs, [sorted(c) for c in consumers], sources
 
 
 class _Tree:

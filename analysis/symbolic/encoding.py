@@ -6,7 +6,6 @@ is the classic static order for partitioned relations)."""
 from __future__ import annotations
 
 import itertools
-import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -14,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from analysis.budget import Budget
+from analysis.lastnet import last_net
 from coral_lang.net import Net, Transition
 
 FORCE_WORK = 400_000
@@ -34,23 +34,15 @@ def arc_weights(net: Net, tr: Transition) -> tuple[dict[int, int], dict[int, int
     return pre, post
 
 
+@last_net
 def _supports(net: Net) -> list[list[int]]:
     """Each transition's places (inputs and outputs), sorted, by place number; the
     last net's are kept (`place_order` reads them three times, and on a net of 40,000
     arcs building them is a tenth of a second)."""
-    cached = _SUPPORTS.get(id(net))
-    if cached is not None and cached[0]() is net:
-        return cached[1]
     index = {p.name: i for i, p in enumerate(net.places)}
-    supports = [
+    return [
         sorted({index[name] for name, _ in (*tr.inputs, *tr.outputs)}) for tr in net.transitions
     ]
-    _SUPPORTS.clear()
-    _SUPPORTS[id(net)] = (weakref.ref(net), supports)
-    return supports
-
-
-_SUPPORTS: dict[int, tuple[weakref.ref[Net], list[list[int]]]] = {}
 
 
 def span_sum(net: Net, order: Sequence[int]) -> int:
