@@ -582,14 +582,13 @@ class SleepSets:
 
 class _Round:
     """The levels of one narrow round (see `_Explorer.speculate`): per level, the
-    candidates' columns and keys, the edge (source in the level above, transition) that
-    produced each, and how many transitions each candidate of the level above enables
-    (``counts[0]`` is for the layer the round started from)."""
+    candidates' columns and keys, the transition that produced each, and how many
+    transitions each candidate of the level above enables (``counts[0]`` is for the
+    layer the round started from)."""
 
     def __init__(self) -> None:
         self.cols: list[npt.NDArray[np.integer]] = []
         self.keys: list[npt.NDArray[np.uint64]] = []
-        self.src: list[npt.NDArray[np.int64]] = []
         self.trans: list[npt.NDArray[np.int64]] = []
         self.counts: list[npt.NDArray[np.int64]] = []
         self.ends: list[int] = []  # cumulative candidates after each level
@@ -601,7 +600,6 @@ class _Round:
         counts: npt.NDArray[np.int64],
         cols: npt.NDArray[np.integer],
         keys: npt.NDArray[np.uint64],
-        src: npt.NDArray[np.int64],
         trans: npt.NDArray[np.int64],
         cells: int,
     ) -> None:
@@ -611,7 +609,6 @@ class _Round:
         self.counts.append(counts)
         self.cols.append(cols)
         self.keys.append(keys)
-        self.src.append(src)
         self.trans.append(trans)
         self.total += keys.shape[0]
         self.ends.append(self.total)
@@ -628,7 +625,6 @@ class _Round:
             return
         self.keys[-1] = keys.take(first, axis=0)
         self.cols[-1] = self.cols[-1].take(first, axis=1)
-        self.src[-1] = self.src[-1].take(first)
         self.trans[-1] = self.trans[-1].take(first)
         self.total -= keys.shape[0] - first.size
         self.ends[-1] = self.total
@@ -654,7 +650,7 @@ class _Round:
         cols = np.concatenate(self.cols, axis=1)
         self.cols = []
         trans = np.concatenate(self.trans)
-        self.trans, self.src = [], []
+        self.trans = []
         counts = np.concatenate([*self.counts[1:], np.full(last, -1, dtype=np.int64)])
         self.counts = self.counts[:1]
         return keys, cols, trans, counts
@@ -1987,7 +1983,7 @@ class _Explorer:
                 produced = src.size
                 keys = keys.take(src, axis=0)
                 keys += self.key_delta.take(trans, axis=0)
-                spec.add(counts, new, keys, src, trans, cells)
+                spec.add(counts, new, keys, trans, cells)
                 current = new
                 if not src.size or spec.total >= budget or spec.cells >= CELLS_PER_STEP:
                     break
