@@ -38,8 +38,8 @@ class SlotTable:
 
     def __init__(self, reserve: int, wide: bool = False) -> None:
         self._reserve = max(16, reserve)
+        # whole-word slots past the three-byte limit, and what `take` returns either way
         self._whole_type: type[np.signedinteger[Any]] = np.int64 if wide else np.int32
-        self._value_type: type[np.signedinteger[Any]] = np.int64 if wide else np.int32
         self._lo: npt.NDArray[np.uint16] | None = None
         self._hi: npt.NDArray[np.int8] | None = None
         self._whole: SlotArray | None = None
@@ -113,7 +113,7 @@ class SlotTable:
             whole: SlotArray = self._whole.take(at)
             return whole
         assert self._lo is not None and self._hi is not None
-        out: SlotArray = self._hi.take(at).astype(self._value_type)
+        out: SlotArray = self._hi.take(at).astype(self._whole_type)
         out <<= 16
         out |= self._lo.take(at)
         return out
