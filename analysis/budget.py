@@ -334,19 +334,27 @@ class Budget:
     # -- slices --------------------------------------------------------------------------
 
     def child(
-        self, seconds: float | None = None, work: int | None = None, unit: str | None = None
+        self,
+        seconds: float | None = None,
+        work: int | None = None,
+        unit: str | None = None,
+        *,
+        share: bool = False,
     ) -> Budget:
         """A budget for one stage: ``seconds`` from now, but never past this budget's
         deadline; its own work cap (work counts differ between stages: states, then
         edges), in ``unit`` (this budget's unit by default); the same clock.
 
         When this budget's deadline comes first, the child quotes this budget's limit in
-        its reason, since that is the limit the user set.
+        its reason, since that is the limit the user set; with ``share`` (``seconds``
+        are a share of this budget's time left) it always does.
         """
         sub = Budget(seconds, work, unit=unit or self.unit, clock=self.clock, memory=self.memory)
         sub.memory_spent = self.memory_spent
         if self.deadline is not None and (sub.deadline is None or self.deadline < sub.deadline):
             sub.deadline = self.deadline
+            sub.limit = self.limit
+        if share:
             sub.limit = self.limit
         return sub
 

@@ -360,9 +360,8 @@ class _Checker:
             # the file and the quick tree came first), so the proofs that need no
             # complete state space (the state equation, coverability) still run.
             time_limit = left * SEARCH_SHARE
-        search = budget.child(seconds=time_limit)
-        if shared:  # its reason names the limit the user set, not the share
-            search.limit = budget.limit
+        # (shared, its reason names the limit the user set, not the share)
+        search = budget.child(seconds=time_limit, share=shared)
         before = resident_bytes()
         self.space: StateSpace = explore(
             net,
@@ -418,9 +417,10 @@ class _Checker:
         from analysis.symbolic.explore import SymbolicLimits, explore_symbolic
 
         left = self.budget.remaining()
-        budget = self.budget.child(seconds=None if left is None else left * share)
-        if left is not None:  # its reason names the limit the user set, not the share
-            budget.limit = self.budget.limit
+        # (its reason names the limit the user set, not the share)
+        budget = self.budget.child(
+            seconds=None if left is None else left * share, share=left is not None
+        )
         return explore_symbolic(self.net, SymbolicLimits(budget=budget))
 
     @property

@@ -161,6 +161,15 @@ def test_a_child_cut_short_by_its_parent_quotes_the_parents_limit() -> None:
     assert own.deadline == 105.0 and own.time_reason() == "time limit of 5 s reached"
 
 
+def test_a_share_of_the_time_left_quotes_the_parents_limit() -> None:
+    clock = FakeClock()
+    parent = Budget(10.0, clock=clock)
+    clock.now = 6.0
+    share = parent.child(seconds=0.8 * 4.0, share=True)  # (4 s left)
+    assert share.deadline == 6.0 + 0.8 * 4.0
+    assert share.time_reason() == "time limit of 10 s reached"
+
+
 def test_a_child_has_its_own_work_cap_and_unit() -> None:
     parent = Budget(work=10, clock=FakeClock())
     child = parent.child(work=3, unit="edge")
