@@ -35,17 +35,16 @@ Counts are exact: packed keys are injective on reachable markings, multi-word ke
 are compared in full, ``edges`` counts (marking, enabled transition)
 pairs, and a count field that some firing would overflow is widened (every stored key
 is re-packed) before any successor using it is trusted; past ``2**60`` tokens
-exploration stops with a reason. Each state keeps the transition that found it (one
-byte below 256 transitions, two below 65,536) and no parent number:
-`StateSpace.trace_to` un-fires that transition on the key and looks the parent up in
-the store, one layer up at a time, so it returns a shortest firing sequence (sleep sets
-keep every state at its BFS depth).
+exploration stops with a reason. A state keeps neither its parent nor the transition
+that found it: `StateSpace.trace_to` finds a parent again among the stored markings of
+the layer before (`analysis.parents`), one layer up at a time, so it returns a shortest
+firing sequence (sleep sets keep every state at its BFS depth).
 
 Memory per stored state: the bytes of a one-word key its fields reach
 (``Layout.word_bytes``: 4 of Referendum-PT-0015's 30 bits, 5 of Peterson-PT-3's 34;
-``8 * W`` for keys of ``W > 1`` words, see `_stored_bytes`), 1 or 2
-bytes of transition, and 6.7 to 10 bytes of hash table (a 4-byte state number per slot,
-load 0.4 to 0.6, see `KeyStore`): about 12 to 20 bytes for one-word nets. What else is
+``8 * W`` for keys of ``W > 1`` words, see `_stored_bytes`) and 5 to 10 bytes of hash
+table (a 3- or 4-byte state number per slot, load 0.4 to 0.6, see `KeyStore`): about 9
+to 18 bytes for one-word nets. What else is
 resident while the search runs, and what bounds it: the sleep sets of the layer being
 expanded and of the next one (in maps of their own that are unmapped as they are read,
 only their nonzero words where layers are wide: `analysis.spool`), one step's
@@ -94,6 +93,7 @@ from analysis.encoding import (
     row_dtype,
 )
 from analysis.inputs import has_inputs, input_edges_at, legal_trace, terminal_rows
+from analysis.parents import parent_step
 from analysis.progress import ProgressCallback, ProgressInfo
 from analysis.spool import RowSpool
 from analysis.stubborn import StubbornSets
@@ -167,7 +167,7 @@ class StateSpace:
         complete: whether every reachable marking was stored.
         stopped_reason: why exploration stopped early (``None`` when complete).
         seconds: wall time of the exploration.
-        stored_bytes: bytes of the arrays kept for the states (keys, table, ``via``).
+        stored_bytes: bytes of the arrays kept for the states (keys and table).
         depth: BFS layers explored (the deepest state is at ``depth - 1``).
         reduced: whether partial-order reduction was on.
         reduction_note: with ``por``, why the reduction was switched off part-way
@@ -193,8 +193,7 @@ class StateSpace:
     layout: Layout = field(repr=False)
     keys: KeyView = field(repr=False)
     store: KeyStore = field(repr=False)
-    key_delta: npt.NDArray[np.uint64] = field(repr=False)
-    via: npt.NDArray[np.integer] = field(repr=False)
+    compact: CompactNet = field(repr=False)
     layer_starts: npt.NDArray[np.int64] = field(repr=False)
     reduction_note: str | None = None
     recorded: int = -1
@@ -280,15 +279,11 @@ class StateSpace:
         operator inputs every input in it fires while the run is on
         (`analysis.inputs.legal_trace`)."""
         path: list[int] = []
-        # No parent numbers are stored (4 bytes a state): the parent of a state is the
-        # stored marking that ``via`` leads from, found by un-firing it on the key.
-        key = self.keys[index : index + 1].copy()
+        # No parent numbers or arriving transitions are stored (1 to 6 bytes a state):
+        # each parent is found again among the stored markings of the layer before.
         while index > 0:
-            t = int(self.via[index])
+            index, t = parent_step(self.compact, self.layout, self.store, self.layer_starts, index)
             path.append(t)
-            key -= self.key_delta[t]
-            index = int(self.store.find(key)[0])
-            assert index >= 0, "the parent of a stored state is stored"
         path.reverse()
         if has_inputs(self.net):
             legal = legal_trace(self.net, path)
@@ -1128,7 +1123,6 @@ class _Explorer:
         self.start = budget.clock()
         small = max_states is not None and max_states < np.iinfo(np.int32).max // 2
         self.index_type = np.int32 if small else np.int64
-        self.via_type = _via_type(cn.n_transitions)
         # The set-up reads the budget between its stages (on a net of 20,000 places
         # and transitions they took 0.1-0.5 s each): once it is spent the search is
         # not started (`SetupStopped`, see `_explore`).
@@ -1176,8 +1170,6 @@ class _Explorer:
             reserve=self.reserve,
             word_bytes=_stored_bytes(self.layout),
         )
-        self.via = Growable((), self.via_type, self.reserve)
-        self.via.append(np.zeros(1, dtype=self.via_type))
         # numbers of the dead markings, in reserved pages of their own: kept as a list of
         # small arrays on the heap, they pinned it between step temporaries, and joining
         # and sorting them at the end came on top of the search's peak (DoubleExponent-PT-
@@ -1201,6 +1193,7 @@ class _Explorer:
         self.offered = 0  # candidates offered to the store so far
         self.repeat_table = np.empty(0, dtype=np.int32)  # see `unrepeated`
         self.layer_starts = [0]
+        self.layer_end = 1  # end of the layer being expanded (states beyond: the next)
         self.stopped: str | None = None
         wanted = sleep_sets and reducer is None and cn.n_transitions > 1
         if wanted:
@@ -1559,11 +1552,9 @@ class _Explorer:
         limit = None if self.max_states is None else self.max_states - self.store.size
         added = self.store.add(keys, limit, want_ids)
         first = added.first
-        if first.size:
-            self.via.append(trans.take(first).astype(self.via_type))
-            if self.stop_when is not None:
-                new = self.successor_cols(cols, src.take(first), trans.take(first))
-                self.offer(new, added.start)
+        if first.size and self.stop_when is not None:
+            new = self.successor_cols(cols, src.take(first), trans.take(first))
+            self.offer(new, added.start)
         if added.cut:
             self.stopped = work_limit_reason(self.max_states or 0, "state")
         return added
@@ -1861,6 +1852,7 @@ class _Explorer:
                 self.next_sleep = RowSpool(words, sparse=None if wide else False)
             sleep_all = sleeps
             sleeps = None
+            self.layer_end = base + width
             c = 0
             while c < width:
                 size = min(self.block_size(), width - c)
@@ -1876,6 +1868,13 @@ class _Explorer:
             sleeps, self.next_sleep = self.next_sleep, None
             if base < self.store.size:
                 self.layer_starts.append(base)
+
+    def close_layers(self) -> None:
+        """After a search stopped inside a layer: the states it stored beyond that
+        layer start the next one (`StateSpace.depth_of`, and the parents found in the
+        layer before, need every stored state's layer)."""
+        if self.store.size > self.layer_end > self.layer_starts[-1]:
+            self.layer_starts.append(self.layer_end)
 
     def frontier(self, start: int, n: int) -> npt.NDArray[np.integer]:
         """Field columns of the states ``start .. start + n - 1``, from their keys; the
@@ -2010,8 +2009,11 @@ class _Explorer:
         added = self.store.add(keys, limit)
         del keys
         first, start = added.first, added.start
+        cut = np.searchsorted(first, spec.ends)  # (the levels' layers, before anything can stop)
+        for j in range(len(spec.ends)):
+            if cut[j] > (cut[j - 1] if j else 0):
+                self.layer_starts.append(start + (int(cut[j - 1]) if j else 0))
         self.account(spec.counts[0], base)
-        self.via.append(trans.take(first).astype(self.via_type))
         del trans
         new = new_cols.take(first, axis=1)
         del new_cols
@@ -2022,10 +2024,6 @@ class _Explorer:
         enables = counts.take(first)
         expanded = int(np.count_nonzero(enables >= 0))  # all but the last level's
         self.account(enables[:expanded], start)
-        cut = np.searchsorted(first, spec.ends)
-        for j in range(len(spec.ends)):
-            if cut[j] > (cut[j - 1] if j else 0):
-                self.layer_starts.append(start + (int(cut[j - 1]) if j else 0))
         if added.cut:
             self.stopped = work_limit_reason(self.max_states or 0, "state")
             raise BudgetExceeded(self.stopped)
@@ -2142,9 +2140,8 @@ class _Explorer:
 
     def insert_bytes(self, candidates: int) -> tuple[int, int]:
         """Bytes that storing up to ``candidates`` successors may allocate: the
-        insertion's temporaries, and the growth of the store (keys, table) and of
-        ``via``."""
-        grown = self.store.growth_bytes(candidates) + self.via.growth_bytes(candidates)
+        insertion's temporaries, and the growth of the store (keys, table)."""
+        grown = self.store.growth_bytes(candidates)
         # The new states' columns (and sleep sets) are kept for the next layer: twice as
         # many as the share of new states among the candidates so far predicts.
         new = min(candidates, 2 * candidates * self.store.size // max(1, self.offered) + 1024)
@@ -2167,16 +2164,6 @@ def _stored_bytes(layout: Layout) -> tuple[int, ...]:
     if layout.n_words == 1 or PACK_WIDE_KEYS:
         return layout.word_bytes
     return (8,) * layout.n_words
-
-
-def _via_type(n_transitions: int) -> type[np.unsignedinteger]:
-    """The narrowest unsigned type that numbers ``n_transitions`` transitions: the
-    arriving transition is kept for every state, so one byte instead of two is a byte
-    per state on the many nets with fewer than 256 transitions."""
-    for candidate in (np.uint8, np.uint16):
-        if n_transitions <= np.iinfo(candidate).max:
-            return candidate
-    return np.uint32
 
 
 def _unsigned(dtype: np.dtype[np.integer]) -> np.dtype[np.unsignedinteger]:
@@ -2350,7 +2337,6 @@ def _unexpanded(
     layout = Layout.for_bits([max(1, int(v).bit_length()) for v in initial.tolist()])
     store = KeyStore(layout.n_words, reserve=1, word_bytes=_stored_bytes(layout))
     store.add(layout.pack(initial[None, :]))
-    via = np.zeros(1, dtype=_via_type(cn.n_transitions))
     return StateSpace(
         net=cn.net,
         states=1,
@@ -2363,14 +2349,13 @@ def _unexpanded(
         complete=False,
         stopped_reason=budget.time_reason(1),
         seconds=budget.clock() - start,
-        stored_bytes=store.nbytes + via.nbytes,
+        stored_bytes=store.nbytes,
         depth=1,
         reduced=reduced,
         layout=layout,
         keys=store.keys,
         store=store,
-        key_delta=np.zeros((cn.n_transitions, layout.n_words), dtype=np.uint64),
-        via=via,
+        compact=cn,
         layer_starts=np.zeros(1, dtype=np.int64),
     )
 
@@ -2404,7 +2389,6 @@ def _explore_with_inputs(
             stopped_reason=None,
             depth=1,
             keys=space.keys,
-            via=space.via[:1],
             layer_starts=np.zeros(1, dtype=np.int64),
         )
     space = _explore(
@@ -2461,6 +2445,7 @@ def _explore(
         pass
     except MemoryError:  # an allocation failed (memory limit or ceiling): say so, keep the rest
         explorer.stopped = memory_limit_reason(budget.memory, explorer.store.size)
+    explorer.close_layers()
     # The bounds of the states stored but not expanded: on a net of 20,000 places the
     # last step of a search stopped by its time limit can store 100,000 of them, 17 s
     # of decoding (rings(2000, 10)); within the limit, or briefly past it.
@@ -2472,7 +2457,6 @@ def _explore(
         explorer.stopped = memory_limit_reason(budget.memory, explorer.store.size)
     seconds = budget.clock() - explorer.start
     store = explorer.store
-    via = explorer.via.view[: store.size]
     dead = explorer.dead.view
     dead.sort()  # in place (no copy on top of the store)
     bounds = explorer.place_bounds()
@@ -2488,14 +2472,13 @@ def _explore(
         complete=explorer.stopped is None,
         stopped_reason=explorer.stopped,
         seconds=seconds,
-        stored_bytes=store.nbytes + via.nbytes,
+        stored_bytes=store.nbytes,
         depth=len(explorer.layer_starts),
         reduced=por,
         layout=explorer.layout,
         keys=store.keys,
         store=store,
-        key_delta=explorer.key_delta,
-        via=via,
+        compact=cn,
         layer_starts=np.asarray(explorer.layer_starts, dtype=np.int64),
         reduction_note=explorer.reduction_note,
         recorded=-1 if explorer.recorded >= store.size else explorer.recorded,

@@ -14,12 +14,11 @@ from analysis.statespace import StateSpace
 
 def fingerprint(space: StateSpace) -> tuple[object, ...]:
     """Everything a search numbers and records: two searches with equal fingerprints
-    found the same states in the same order, by the same transitions."""
+    found the same states in the same order, layer by layer."""
     return (
         space.states,
         space.edges,
         space.keys.tolist(),
-        space.via.tolist(),
         space.deadlocks.tolist(),
         space.place_bounds.tolist(),
         space.fired_transitions.tolist(),
