@@ -118,3 +118,24 @@ def test_a_state_whose_parent_is_not_stored_is_an_error() -> None:
     starts = np.array([0, 1, 2], dtype=np.int64)  # state 5 said to be of layer 2
     with pytest.raises(ValueError, match="no stored parent"):
         parent_step(space.compact, space.layout, space.store, starts, 5)
+
+
+def test_a_search_stopped_inside_a_layer_still_knows_the_layers_it_stored() -> None:
+    # p1 pumps p0 forever; stubborn sets take layer-by-layer steps (no narrow rounds),
+    # and the state limit cuts a step that stored the first state of a new layer.
+    net = Net(
+        "pump",
+        (Place("p0", 0), Place("p1", 1)),
+        (
+            Transition("t0", (("p1", 1),), ()),
+            Transition("t1", (("p0", 1),), ()),
+            Transition("t2", (("p1", 1),), (("p0", 1), ("p1", 1))),
+            Transition("t3", (("p0", 1),), ()),
+        ),
+    )
+    full = explore(net, max_states=300)
+    reduced = explore(net, max_states=300, por=True)
+    assert not reduced.complete and reduced.states == 300
+    assert reduced.layer_starts.tolist() == full.layer_starts.tolist()
+    assert reduced.depth_of(299) == full.depth_of(299) == 150
+    assert replay(net, reduced.trace_to(299)) == reduced.marking(299)
