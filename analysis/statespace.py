@@ -64,6 +64,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -161,7 +162,8 @@ class StateSpace:
         deadlocks: numbers of all dead states found (no transition enabled; on a net
             with operator inputs, every *terminal* state: no transition but inputs
             enabled, see `analysis.inputs`), ascending, so ``deadlocks[0]`` has the
-            shortest trace.
+            shortest trace; ``int32`` when the state limit keeps state numbers below
+            2**30, else ``int64``.
         fired_transitions: ``fired_transitions[t]`` is whether ``t`` is enabled in some
             stored marking. With ``por`` this under-approximates (reduced graph).
         complete: whether every reachable marking was stored.
@@ -182,7 +184,7 @@ class StateSpace:
     place_bounds: npt.NDArray[np.int64]
     max_tokens_place: int
     max_tokens_marking: int
-    deadlocks: npt.NDArray[np.int64]
+    deadlocks: npt.NDArray[np.signedinteger[Any]]
     fired_transitions: npt.NDArray[np.bool_]
     complete: bool
     stopped_reason: str | None
@@ -1173,8 +1175,10 @@ class _Explorer:
         # numbers of the dead markings, in reserved pages of their own: kept as a list of
         # small arrays on the heap, they pinned it between step temporaries, and joining
         # and sorting them at the end came on top of the search's peak (DoubleExponent-PT-
-        # 003: 260,000 dead markings, 2.6 resident bytes per state)
-        self.dead = Growable((), np.int64, max(1, self.reserve // DEAD_RESERVE_SHARE))
+        # 003: 260,000 dead markings, 2.6 resident bytes per state); 4 bytes each while
+        # the state limit keeps numbers below 2**31 (0.4 more of DoubleExponent's bytes)
+        reserve = max(1, self.reserve // DEAD_RESERVE_SHARE)
+        self.dead = Growable((), self.index_type, reserve)
         self.fired = np.zeros(cn.n_transitions, dtype=bool)
         self.field_max = fnet.initial.copy()  # largest value of each count field
         self.seen = np.zeros(fnet.n_seen, dtype=bool)  # (component, value) pairs met
