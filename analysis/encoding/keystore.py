@@ -262,25 +262,16 @@ of word ``w`` is element ``(8 * w + offset) // size`` of a row viewed as ``<u{si
 (the same on every machine; on a little-endian one the views cost nothing)."""
 
 
-@dataclass(frozen=True)
 class _Plane:
     """One aligned plane of a word: ``size`` bytes from byte ``offset`` of word ``word``,
-    kept in ``rows``."""
+    kept in ``rows``; in a word row viewed as ``le`` (little-endian, ``size`` bytes),
+    element ``column``."""
 
-    word: int
-    offset: int
-    size: int
-    rows: Growable
-
-    @property
-    def le(self) -> np.dtype[Any]:
-        """The little-endian type of the plane's values inside a word row."""
-        return np.dtype(f"<u{self.size}")
-
-    @property
-    def column(self) -> int:
-        """The plane's element in a word row viewed as `le`."""
-        return (8 * self.word + self.offset) // self.size
+    def __init__(self, word: int, offset: int, size: int, reserve: int) -> None:
+        self.size = size
+        self.rows = Growable((), np.dtype(f"u{size}"), reserve)
+        self.le: np.dtype[Any] = np.dtype(f"<u{size}")
+        self.column = (8 * word + offset) // size
 
 
 def _le_words(words: KeyArray) -> npt.NDArray[Any]:
@@ -332,8 +323,7 @@ class PackedRows:
         for w, b in enumerate(self.word_bytes):
             offset = 0
             for size in _PLANES[b]:
-                rows = Growable((), np.dtype(f"u{size}"), reserve)
-                self._planes.append(_Plane(w, offset, size, rows))
+                self._planes.append(_Plane(w, offset, size, reserve))
                 offset += size
         # compared widest first (a whole word tells most keys apart), then in order
         self._compared = sorted(self._planes, key=lambda p: -p.size)
