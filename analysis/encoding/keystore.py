@@ -256,6 +256,34 @@ _PLANES: dict[int, tuple[int, ...]] = {
 """How a word's used bytes are split into aligned planes of 1, 2, 4 or 8 bytes."""
 
 
+_LE_WORD = np.dtype("<u8")
+"""Words as the store reads their bytes: a plane of ``size`` bytes at byte ``offset``
+of word ``w`` is element ``(8 * w + offset) // size`` of a row viewed as ``<u{size}``
+(the same on every machine; on a little-endian one the views cost nothing)."""
+
+
+class _Plane:
+    """One aligned plane of a word: ``size`` bytes from byte ``offset`` of word ``word``,
+    kept in ``rows``; in a word row viewed as ``le`` (little-endian, ``size`` bytes),
+    element ``column``."""
+
+    def __init__(self, word: int, offset: int, size: int, reserve: int) -> None:
+        self.size = size
+        self.rows = Growable((), np.dtype(f"u{size}"), reserve)
+        self.le: np.dtype[Any] = np.dtype(f"<u{size}")
+        self.column = (8 * word + offset) // size
+
+
+def _le_words(words: KeyArray) -> npt.NDArray[Any]:
+    """``words`` as contiguous little-endian words (no copy on a little-endian machine
+    when they are contiguous already)."""
+    return np.ascontiguousarray(words, dtype=_LE_WORD)
+
+
+KeyParts = list[npt.NDArray[Any]]
+"""Candidate keys cut as a `PackedRows` compares them (`PackedRows.split`)."""
+
+
 class PackedRows:
     """Keys of ``len(word_bytes)`` words, each stored in only its low ``word_bytes[w]``
     bytes (the bytes its fields use; the others are always zero).
@@ -264,10 +292,18 @@ class PackedRows:
     low 4 bytes and a ``uint8`` plane for the fifth. Every plane is a contiguous,
     aligned array, so a gather is one ``take`` per plane (numpy's ``take`` would first
     copy a whole unaligned strided view, and its fancy indexing of one runs at a third
-    of the speed) and a range of rows a slice per plane; the word is the planes
-    shifted together. With whole words the rows are one ``(rows, words)`` array, as
-    before. Planes are reserved like `Growable`'s (zeroed memory, address space until
-    written) and grow by `GROWTH` past the reservation.
+    of the speed) and a range of rows a slice per plane; a word is its planes written
+    into the bytes of a zeroed word. With whole words the rows are one ``(rows,
+    words)`` array, as before. Planes are reserved like `Growable`'s (zeroed memory,
+    address space until written) and grow by `GROWTH` past the reservation.
+
+    Candidates are compared with stored rows a plane at a time (`split`, `same`): most
+    comparisons of a search are with another key met on the probe path, which the
+    first plane tells apart, so the other planes are gathered only for the few rows
+    still equal. Each plane is a random access of its own, so gathering all of a key's
+    planes costs several times one gather of whole words; comparing the first plane
+    only costs less than that one gather. Whole words below `WIDE_KEYS` are compared
+    the same way, a word at a time.
     """
 
     def __init__(self, word_bytes: Sequence[int], reserve: int) -> None:
@@ -280,25 +316,24 @@ class PackedRows:
         self.masks = [np.uint64((1 << (8 * b)) - 1) for b in self.word_bytes]
         self.size = 0
         reserve = max(1, reserve)
+        self._planes: list[_Plane] = []
         if self.whole:
             self._whole = Growable((self.n_words,), np.uint64, reserve)
             return
-        # per word: (plane, bit shift of the plane inside the word)
-        self._planes: list[list[tuple[Growable, np.uint64]]] = []
-        for b in self.word_bytes:
-            planes, shift = [], 0
+        for w, b in enumerate(self.word_bytes):
+            offset = 0
             for size in _PLANES[b]:
-                dtype = np.dtype(f"u{size}")
-                planes.append((Growable((), dtype, reserve), np.uint64(shift)))
-                shift += 8 * size
-            self._planes.append(planes)
+                self._planes.append(_Plane(w, offset, size, reserve))
+                offset += size
+        # compared widest first (a whole word tells most keys apart), then in order
+        self._compared = sorted(self._planes, key=lambda p: -p.size)
 
     @property
     def capacity(self) -> int:
         """Rows that fit without copying."""
         if self.whole:
             return self._whole.capacity
-        return min(p.capacity for planes in self._planes for p, _ in planes)
+        return min(p.rows.capacity for p in self._planes)
 
     @property
     def nbytes(self) -> int:
@@ -309,7 +344,14 @@ class PackedRows:
         """As `Growable.growth_bytes`, over all planes."""
         if self.whole:
             return self._whole.growth_bytes(rows)
-        return sum(p.growth_bytes(rows) for planes in self._planes for p, _ in planes)
+        return sum(p.rows.growth_bytes(rows) for p in self._planes)
+
+    def _overflow(self, words: KeyArray) -> int | None:
+        """A word of ``words`` that some key uses beyond its bytes, or ``None``."""
+        for w, b in enumerate(self.word_bytes):
+            if b < 8 and words.shape[0] and words[:, w].max() > self.masks[w]:
+                return w
+        return None
 
     def put(self, start: int, words: KeyArray) -> None:
         """Write ``words`` (shape ``(m, n_words)``) as rows ``start ...`` (within
@@ -323,32 +365,30 @@ class PackedRows:
             self._whole.view[start:end] = words
             self.size = max(self.size, end)
             return
-        for w, planes in enumerate(self._planes):
-            word = words[:, w]
-            if (word & ~self.masks[w]).any():
-                raise ValueError(
-                    f"PackedRows: a key uses more than {self.word_bytes[w]} bytes of word {w}"
-                )
-            for plane, shift in planes:
-                plane.ensure(end)
-                plane.size = max(plane.size, end)
-                part = word >> shift if shift else word
-                plane.view[start:end] = part.astype(plane.view.dtype)  # keeps the low bytes
+        w = self._overflow(words)
+        if w is not None:
+            raise ValueError(
+                f"PackedRows: a key uses more than {self.word_bytes[w]} bytes of word {w}"
+            )
+        le = _le_words(words)
+        for p in self._planes:
+            p.rows.ensure(end)
+            p.rows.size = max(p.rows.size, end)
+            np.copyto(p.rows.view[start:end], le.view(p.le)[:, p.column])
         self.size = max(self.size, end)
 
     def append(self, words: KeyArray) -> None:
         """Add ``words`` as the next rows."""
         self.put(self.size, words)
 
-    def _joined(self, parts: list[tuple[npt.NDArray[Any], np.uint64]]) -> KeyArray:
-        """One word from its planes' values. A ``uint64`` plane is a word's only one,
-        so it is returned as is (no copy, never written); a narrower first plane is
-        copied into the word the others are OR-ed into."""
-        first, _ = parts[0]
-        word: KeyArray = first.astype(np.uint64, copy=False)
-        for value, shift in parts[1:]:
-            word |= np.left_shift(value, shift, dtype=np.uint64)
-        return word
+    def _assembled(self, values: list[npt.NDArray[Any]]) -> KeyArray:
+        """Words from the values of every plane (in `_planes` order): each written into
+        its bytes of a zeroed word row."""
+        le = np.zeros((values[0].shape[0], self.n_words), dtype=_LE_WORD)
+        for p, value in zip(self._planes, values, strict=True):
+            le.view(p.le)[:, p.column] = value
+        words: KeyArray = le.astype(np.uint64, copy=False)
+        return words
 
     def words(self, start: int, stop: int) -> KeyArray:
         """Rows ``start .. stop - 1`` as words ``(m, n_words)`` (a view with whole
@@ -357,27 +397,89 @@ class PackedRows:
         if self.whole:
             view: KeyArray = self._whole.view[start:stop]
             return view
-        out = np.empty((stop - start, self.n_words), dtype=np.uint64)
-        for w, planes in enumerate(self._planes):
-            out[:, w] = self._joined([(p.view[start:stop], s) for p, s in planes])
-        return out
+        return self._assembled([p.rows.view[start:stop] for p in self._planes])
 
     def take(self, ids: IntArray) -> KeyArray:
         """Rows ``ids`` as words ``(len(ids), n_words)``."""
         if self.whole:
             rows: KeyArray = self._whole.view.take(ids, axis=0)
             return rows
-        out = np.empty((ids.size, self.n_words), dtype=np.uint64)
-        for w, planes in enumerate(self._planes):
-            out[:, w] = self._joined([(p.view.take(ids), s) for p, s in planes])
-        return out
+        return self._assembled([p.rows.view.take(ids) for p in self._planes])
 
     def take_flat(self, ids: IntArray) -> KeyArray:
         """`take` of one-word rows as a 1-D array."""
         if self.whole:
             flat: KeyArray = self._whole.view[:, 0].take(ids)
             return flat
-        return self._joined([(p.view.take(ids), s) for p, s in self._planes[0]])
+        return np.ascontiguousarray(self.take(ids)[:, 0])
+
+    # -- comparing candidates with stored rows -----------------------------------------
+
+    def split(self, words: KeyArray) -> tuple[KeyParts, BoolArray | None]:
+        """Candidate keys ``words`` cut for `same`: per compared plane, the candidates'
+        values in it (contiguous); and which candidates a row can hold at all (``None``
+        when all can): one that uses a byte beyond its word's ``word_bytes`` equals no
+        stored row, yet its planes alone might."""
+        if self.whole:
+            if self.n_words >= WIDE_KEYS:
+                return [np.ascontiguousarray(words)], None
+            return [np.ascontiguousarray(words[:, w]) for w in range(self.n_words)], None
+        le = _le_words(words)
+        parts = [
+            np.ascontiguousarray(le.view(p.le)[:, p.column], p.rows.view.dtype)
+            for p in self._compared
+        ]
+        fits: BoolArray | None = None
+        if self._overflow(words) is not None:
+            fits = np.ones(words.shape[0], dtype=bool)
+            for w, mask in enumerate(self.masks):
+                fits &= words[:, w] <= mask
+        return parts, fits
+
+    def same(self, ids: IntArray, parts: KeyParts, at: IntArray) -> BoolArray:
+        """Whether stored rows ``ids`` equal the candidates at positions ``at`` of
+        ``parts`` (`split`): the first compared plane for all, the next ones only
+        for the rows equal so far (all rows while most are)."""
+        if self.whole and self.n_words >= WIDE_KEYS:
+            rows = self._whole.view.take(ids, axis=0)
+            same_rows: BoolArray = ~_rows_differ(rows, parts[0].take(at, axis=0))
+            return same_rows
+        gather = self._gatherer(ids)
+        out: BoolArray = gather(0, ids) == parts[0].take(at)
+        for k in range(1, len(parts)):
+            equal = int(np.count_nonzero(out))
+            if not equal:
+                break
+            if 2 * equal >= out.size:
+                out &= gather(k, ids) == parts[k].take(at)
+            else:
+                live = np.flatnonzero(out)
+                out[live] = gather(k, ids.take(live)) == parts[k].take(at.take(live))
+        return out
+
+    def _gatherer(self, ids: IntArray) -> Callable[[int, IntArray], npt.NDArray[Any]]:
+        """``gather(k, rows)``: compared plane ``k`` of stored ``rows`` (a subset of
+        ``ids``, or ``ids`` itself)."""
+        if not self.whole:
+            compared = self._compared
+            return lambda k, rows: compared[k].rows.view.take(rows)
+        n_words, flat = self.n_words, self._whole.view.reshape(-1)
+        if n_words == 1:
+            return lambda k, rows: flat.take(rows)
+        return lambda k, rows: flat.take(rows * n_words + k)
+
+
+def same_parts(parts: KeyParts, a: IntArray, b: IntArray) -> BoolArray:
+    """Whether the candidates at positions ``a`` and ``b`` of ``parts`` (one batch's
+    `PackedRows.split`) are equal, plane by plane."""
+    first = parts[0]
+    if first.ndim == 2:
+        wide: BoolArray = ~_rows_differ(first.take(a, axis=0), first.take(b, axis=0))
+        return wide
+    out: BoolArray = first.take(a) == first.take(b)
+    for part in parts[1:]:
+        out &= part.take(a) == part.take(b)
+    return out
 
 
 class KeyView:
@@ -432,14 +534,6 @@ def _word_bytes(n_words: int, word_bytes: Sequence[int] | None) -> tuple[int, ..
     if len(word_bytes) != n_words:
         raise ValueError(f"KeyStore: {len(word_bytes)} word byte counts for {n_words} words")
     return tuple(int(b) for b in word_bytes)
-
-
-def _same(a: npt.NDArray[np.uint64], b: npt.NDArray[np.uint64]) -> BoolArray:
-    """Row-wise equality of keys: 1-D arrays for one-word keys, rows otherwise."""
-    if a.ndim == 1:
-        same: BoolArray = a == b
-        return same
-    return ~_rows_differ(a, b)
 
 
 class KeyStore:
@@ -547,10 +641,6 @@ class KeyStore:
 
     # -- slots -----------------------------------------------------------------------
 
-    def _flat(self, keys: KeyArray) -> npt.NDArray[np.uint64]:
-        """One-word keys as a 1-D array (cheaper gathers and compares), others as is."""
-        return keys[:, 0] if self.n_words == 1 else keys
-
     def _home(self, keys: KeyArray) -> IntArray:
         """Home slot of each key: the top 32 bits of its hash scaled to the table."""
         h = _hash(keys)
@@ -568,31 +658,28 @@ class KeyStore:
         self,
         content: npt.NDArray[np.integer],
         which: IntArray,
-        cand: npt.NDArray[np.uint64],
+        parts: KeyParts,
     ) -> BoolArray:
         """Whether the slots with ``content`` hold the key of candidates ``which``
-        (a positive content refers to ``stored``, a negative one to ``cand``)."""
+        (``parts`` of the batch; a positive content refers to a stored key, a negative
+        one to a candidate)."""
         out = np.zeros(content.size, dtype=bool)
         full = np.flatnonzero(content)
         ref = content.take(full).astype(np.int64)
         if ref.size and int(ref.min()) > 0:  # the usual case: stored states only
             ref -= 1
-            out[full] = _same(self._stored(ref), cand.take(which.take(full), axis=0))
+            out[full] = self._keys.same(ref, parts, which.take(full))
             return out
         old = ref > 0
         if old.any():
             at = full.compress(old)
             ref_old = ref.compress(old) - 1
-            out[at] = _same(self._stored(ref_old), cand.take(which.take(at), axis=0))
+            out[at] = self._keys.same(ref_old, parts, which.take(at))
         if not old.all():
             at = full.compress(~old)
             ref_new = -1 - ref.compress(~old)
-            out[at] = _same(cand.take(ref_new, axis=0), cand.take(which.take(at), axis=0))
+            out[at] = same_parts(parts, ref_new, which.take(at))
         return out
-
-    def _stored(self, ids: IntArray) -> npt.NDArray[np.uint64]:
-        """Stored keys ``ids`` in `_flat` form."""
-        return self._keys.take_flat(ids) if self.n_words == 1 else self._keys.take(ids)
 
     def _resize(self, slots: int) -> None:
         """A table of ``slots`` slots, rebuilt from the stored keys a chunk at a time
@@ -682,7 +769,7 @@ class KeyStore:
         self,
         slots: IntArray,
         which: IntArray,
-        cand: npt.NDArray[np.uint64],
+        parts: KeyParts,
     ) -> tuple[BoolArray, BoolArray, IntArray]:
         """One probing round from ``slots`` for candidates ``which``: per candidate,
         whether it found its key, whether it found a free slot (never both), and that
@@ -691,12 +778,12 @@ class KeyStore:
         (less work per candidate)."""
         if slots.size > PROBE_WINDOW_BELOW:
             content = self._table.take(slots)
-            return self._matches(content, which, cand), content == EMPTY, slots
+            return self._matches(content, which, parts), content == EMPTY, slots
         window = slots[:, None] + _WINDOW
         self._wrap(window)
         contents = self._table.take(window)
         wide = np.repeat(which, _WINDOW.size)
-        hits = self._matches(contents.reshape(-1), wide, cand).reshape(contents.shape)
+        hits = self._matches(contents.reshape(-1), wide, parts).reshape(contents.shape)
         stops = contents == EMPTY
         stops |= hits
         first = stops.argmax(axis=1)
@@ -719,12 +806,15 @@ class KeyStore:
     def find(self, cand: KeyArray) -> IntArray:
         """State number of each candidate key, ``-1`` if it is not stored."""
         cand = np.ascontiguousarray(cand)
-        flat = self._flat(cand)
+        parts, fits = self._keys.split(cand)
         slots = self._home(cand)
         out = np.full(cand.shape[0], -1, dtype=np.int64)
         pos = np.arange(cand.shape[0], dtype=np.int64)
+        if fits is not None:  # keys no row can hold are not stored
+            pos = np.flatnonzero(fits)
+            slots = slots.take(pos)
         while pos.size:
-            hit, free, at = self._probe(slots, pos, flat)
+            hit, free, at = self._probe(slots, pos, parts)
             where = np.flatnonzero(hit)
             out[pos.take(where)] = self._table.take(at.take(where)).astype(np.int64) - 1
             stopped = hit | free
@@ -752,6 +842,9 @@ class KeyStore:
         """
         cand = np.ascontiguousarray(cand)
         m, start = cand.shape[0], self.size
+        parts, fits = self._keys.split(cand)
+        if fits is not None:  # (before the table changes)
+            raise ValueError("KeyStore: a key uses more bytes of a word than the store keeps")
         if limit is not None and m > limit:
             return self._add_capped(cand, limit)
         firsts: list[IntArray] = []
@@ -762,7 +855,8 @@ class KeyStore:
             if room < min(m - done, self._slots >> 3):
                 self._resize(self._grown(self._slots))
                 continue
-            first, piece_ids = self._claim(cand[done : done + room], want_ids)
+            piece = slice(done, done + room)
+            first, piece_ids = self._claim(cand[piece], [p[piece] for p in parts], want_ids)
             firsts.append(first + done)
             if piece_ids is not None:
                 ids.append(piece_ids)
@@ -774,23 +868,25 @@ class KeyStore:
             all_ids = np.zeros(0, dtype=np.int64)
         return Added(first, start, False, all_ids)
 
-    def _claim(self, cand: KeyArray, want_ids: bool) -> tuple[IntArray, IntArray | None]:
-        """Insert a batch that fits in the table below `BATCH_LOAD`: the first
-        occurrence of every new key becomes a new state. Returns the positions of those
-        first occurrences (ascending) and, if asked, every candidate's state number."""
+    def _claim(
+        self, cand: KeyArray, parts: KeyParts, want_ids: bool
+    ) -> tuple[IntArray, IntArray | None]:
+        """Insert a batch (``parts`` its `PackedRows.split`) that fits in the table
+        below `BATCH_LOAD`: the first occurrence of every new key becomes a new state.
+        Returns the positions of those first occurrences (ascending) and, if asked,
+        every candidate's state number."""
         m = cand.shape[0]
-        flat = self._flat(cand)
         slots = self._home(cand)
         table = self._table
         final = np.empty(m, dtype=np.int64) if want_ids else None
         pos = np.arange(m, dtype=np.int64)
         claimed: list[IntArray] = []
         while True:
-            done, empty, at = self._probe(slots, pos, flat)
+            done, empty, at = self._probe(slots, pos, parts)
             stopped = done | empty
             free = np.flatnonzero(empty)
             if free.size:
-                done[free] = self._claim_free(flat, pos.take(free), at.take(free))
+                done[free] = self._claim_free(parts, pos.take(free), at.take(free))
                 claimed.append(self._reps)
             if final is not None:
                 settled = np.flatnonzero(done)
@@ -814,15 +910,19 @@ class KeyStore:
             return first, None
         return first, table.take(final).astype(np.int64) - 1
 
-    def _claim_free(self, cand: npt.NDArray[np.uint64], fp: IntArray, fs: IntArray) -> BoolArray:
+    def _claim_free(self, parts: KeyParts, fp: IntArray, fs: IntArray) -> BoolArray:
         """Candidates ``fp`` (batch positions) found free slots ``fs``: each slot gets
         the first (smallest position) of its claimants as the new key's representative,
         and the claimants with the representative's key are its repeats. Returns which
         candidates are settled (representative or repeat); sets ``self._reps`` to the
         slots that got a representative."""
         rep = self._table.claim(fs, fp)  # (several candidates may claim one slot)
-        settled = _same(cand.take(fp, axis=0), cand.take(rep, axis=0))
-        self._reps = fs.compress(rep == fp)
+        won: BoolArray = rep == fp
+        settled = won.copy()
+        lost = np.flatnonzero(~won)  # (few: most claimants win their slot alone)
+        if lost.size:
+            settled[lost] = same_parts(parts, fp.take(lost), rep.take(lost))
+        self._reps = fs.compress(won)
         return settled
 
     def _add_capped(self, cand: KeyArray, limit: int) -> Added:
