@@ -42,7 +42,7 @@ firing sequence (sleep sets keep every state at its BFS depth).
 
 Memory per stored state: the bytes of a one-word key its fields reach
 (``Layout.word_bytes``: 4 of Referendum-PT-0015's 30 bits, 5 of Peterson-PT-3's 34;
-``8 * W`` for keys of ``W > 1`` words, see `_stored_bytes`) and 5 to 10 bytes of hash
+likewise for keys of ``W > 1`` words, see `_stored_bytes`) and 5 to 10 bytes of hash
 table (a 3- or 4-byte state number per slot, load 0.4 to 0.6, see `KeyStore`): about 9
 to 18 bytes for one-word nets. What else is
 resident while the search runs, and what bounds it: the sleep sets of the layer being
@@ -377,8 +377,9 @@ RECORD_CELLS = 1 << 18
 BLOCK_TEMPORARIES = 64 << 20
 """Bytes of temporaries a block-wise pass over the store (a re-packing) may hold."""
 
-PACK_WIDE_KEYS = False
-"""Whether keys of several words are stored byte-granular too (see `_stored_bytes`)."""
+PACK_WIDE_KEYS = True
+"""Whether keys of several words are stored byte-granular too (see `_stored_bytes`);
+off, they are stored as whole words (tests compare the two)."""
 
 GUARD_MIN_BYTES = 1 << 20
 """Smallest allocation `_Explorer.guard` checks against the memory limit (reading the
@@ -2160,11 +2161,13 @@ class _Explorer:
 
 
 def _stored_bytes(layout: Layout) -> tuple[int, ...]:
-    """Bytes the store keeps of each key word: only those the fields reach for one-word
-    keys, whole words otherwise. Multi-word keys in planes cost a gather per plane on
-    every probe where whole words cost one per key: on FMS-PT-00005 (8 + 2 bytes) 20 %
-    more CPU for 6 bytes less per state, and its resident memory stays above 25 B
-    either way (`PACK_WIDE_KEYS` turns it on)."""
+    """Bytes the store keeps of each key word: only those the fields reach
+    (`Layout.word_bytes`), unless `PACK_WIDE_KEYS` is off and the key has several
+    words (then whole words). Since the store compares a key a plane at a time, later
+    planes only where the first ones are equal (`analysis.encoding.PackedRows.same`),
+    planes cost DoubleExponent-PT-003 (8 + 7 bytes) about 3 % more CPU than whole
+    words for a byte less per state; before, when every probe gathered every plane,
+    they cost 10-20 %."""
     if layout.n_words == 1 or PACK_WIDE_KEYS:
         return layout.word_bytes
     return (8,) * layout.n_words

@@ -89,10 +89,10 @@ def test_explorer_stores_the_bytes_its_layout_reaches(net: Net) -> None:
 @settings(max_examples=10, deadline=None, derandomize=True)
 @given(small_nets(max_initial=3))
 def test_wide_keys_packed_give_the_same_state_space(net: Net) -> None:
-    plain = explore(net, max_states=500)
+    packed = explore(net, max_states=500)
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(statespace, "PACK_WIDE_KEYS", True)
-        packed = explore(net, max_states=500)
+        patch.setattr(statespace, "PACK_WIDE_KEYS", False)
+        plain = explore(net, max_states=500)
     assert packed.store.word_bytes == packed.layout.word_bytes
     assert (packed.states, packed.edges) == (plain.states, plain.edges)
     assert packed.deadlocks.tolist() == plain.deadlocks.tolist()
@@ -111,10 +111,10 @@ def test_wide_keys_packed_agree_on_a_net_of_several_words() -> None:
             "cd": ({"fuel": 1, "c": 1}, {"d": 1}),
         },
     )
-    plain = explore(net)
+    packed = explore(net)
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(statespace, "PACK_WIDE_KEYS", True)
-        packed = explore(net)
+        patch.setattr(statespace, "PACK_WIDE_KEYS", False)
+        plain = explore(net)
     assert packed.layout.n_words > 1 and sum(packed.store.word_bytes) < 8 * packed.layout.n_words
     assert plain.store.word_bytes == (8,) * plain.layout.n_words
     assert (packed.states, packed.edges) == (plain.states, plain.edges) == (51 * 52 // 2, 2550)
