@@ -281,8 +281,9 @@ class StateSpace:
         operator inputs every input in it fires while the run is on
         (`analysis.inputs.legal_trace`)."""
         path: list[int] = []
-        # No parent numbers or arriving transitions are stored (1 to 6 bytes a state):
-        # each parent is found again among the stored markings of the layer before.
+        # Neither parent numbers nor arriving transitions (1 or 2 bytes a state) are
+        # stored: each parent is found again among the stored markings of the layer
+        # before.
         while index > 0:
             index, t = parent_step(self.compact, self.layout, self.store, self.layer_starts, index)
             path.append(t)
@@ -580,14 +581,14 @@ class SleepSets:
 
 class _Round:
     """The levels of one narrow round (see `_Explorer.speculate`): per level, the
-    candidates' columns and keys, the transition that produced each, and how many
-    transitions each candidate of the level above enables (``counts[0]`` is for the
-    layer the round started from)."""
+    candidates' columns and keys, and how many transitions each candidate of the level
+    above enables (``counts[0]`` is for the layer the round started from). Which
+    transition produced a candidate is not kept: no state keeps it
+    (`analysis.parents`)."""
 
     def __init__(self) -> None:
         self.cols: list[npt.NDArray[np.integer]] = []
         self.keys: list[npt.NDArray[np.uint64]] = []
-        self.trans: list[npt.NDArray[np.int64]] = []
         self.counts: list[npt.NDArray[np.int64]] = []
         self.ends: list[int] = []  # cumulative candidates after each level
         self.total = 0
@@ -598,7 +599,6 @@ class _Round:
         counts: npt.NDArray[np.int64],
         cols: npt.NDArray[np.integer],
         keys: npt.NDArray[np.uint64],
-        trans: npt.NDArray[np.int64],
         cells: int,
     ) -> None:
         """One more level (``counts`` is for the level it was expanded from, whose
@@ -607,7 +607,6 @@ class _Round:
         self.counts.append(counts)
         self.cols.append(cols)
         self.keys.append(keys)
-        self.trans.append(trans)
         self.total += keys.shape[0]
         self.ends.append(self.total)
 
@@ -616,26 +615,20 @@ class _Round:
 
         Exact: a repeat's successors are its first copy's, which the next level gets
         anyway, at positions before the repeat's; every marking's first candidate, and
-        so the states' numbers, edges and transitions, stay the same."""
+        so the states' numbers and edges stay the same."""
         keys = self.keys[-1]
         first = _first_rows(keys)
         if first.size == keys.shape[0]:
             return
         self.keys[-1] = keys.take(first, axis=0)
         self.cols[-1] = self.cols[-1].take(first, axis=1)
-        self.trans[-1] = self.trans[-1].take(first)
         self.total -= keys.shape[0] - first.size
         self.ends[-1] = self.total
 
     def joined(
         self,
-    ) -> tuple[
-        npt.NDArray[np.uint64],
-        npt.NDArray[np.integer],
-        npt.NDArray[np.int64],
-        npt.NDArray[np.int64],
-    ]:
-        """All candidates in level order: keys, columns, transition, and how many
+    ) -> tuple[npt.NDArray[np.uint64], npt.NDArray[np.integer], npt.NDArray[np.int64]]:
+        """All candidates in level order: keys, columns, and how many
         transitions each enables (``-1`` on the last level, which was not expanded).
 
         The levels are released as they are joined (but ``counts[0]``, the starting
@@ -647,11 +640,9 @@ class _Round:
         self.keys = []
         cols = np.concatenate(self.cols, axis=1)
         self.cols = []
-        trans = np.concatenate(self.trans)
-        self.trans = []
         counts = np.concatenate([*self.counts[1:], np.full(last, -1, dtype=np.int64)])
         self.counts = self.counts[:1]
-        return keys, cols, trans, counts
+        return keys, cols, counts
 
 
 def _first_rows(keys: npt.NDArray[np.uint64]) -> npt.NDArray[np.int64]:
@@ -1177,7 +1168,7 @@ class _Explorer:
         # small arrays on the heap, they pinned it between step temporaries, and joining
         # and sorting them at the end came on top of the search's peak (DoubleExponent-PT-
         # 003: 260,000 dead markings, 2.6 resident bytes per state); 4 bytes each while
-        # the state limit keeps numbers below 2**31 (0.4 more of DoubleExponent's bytes)
+        # the state limit keeps numbers below 2**30 (0.4 more of DoubleExponent's bytes)
         reserve = max(1, self.reserve // DEAD_RESERVE_SHARE)
         self.dead = Growable((), self.index_type, reserve)
         self.fired = np.zeros(cn.n_transitions, dtype=bool)
@@ -1987,7 +1978,7 @@ class _Explorer:
                 produced = src.size
                 keys = keys.take(src, axis=0)
                 keys += self.key_delta.take(trans, axis=0)
-                spec.add(counts, new, keys, trans, cells)
+                spec.add(counts, new, keys, cells)
                 current = new
                 if not src.size or spec.total >= budget or spec.cells >= CELLS_PER_STEP:
                     break
@@ -2009,7 +2000,7 @@ class _Explorer:
         if spec is None:
             return None
         self.guard_insert(spec.total)
-        keys, new_cols, trans, counts = spec.joined()
+        keys, new_cols, counts = spec.joined()
         limit = None if self.max_states is None else self.max_states - self.store.size
         added = self.store.add(keys, limit)
         del keys
@@ -2019,7 +2010,6 @@ class _Explorer:
             if cut[j] > (cut[j - 1] if j else 0):
                 self.layer_starts.append(start + (int(cut[j - 1]) if j else 0))
         self.account(spec.counts[0], base)
-        del trans
         new = new_cols.take(first, axis=1)
         del new_cols
         self.record_pending(start)
