@@ -1546,7 +1546,7 @@ class _Explorer:
             keys = self.store.keys.take(base + src, axis=0)
             keys += self.key_delta.take(trans, axis=0)
         limit = None if self.max_states is None else self.max_states - self.store.size
-        added = self.store.add(keys, limit, want_ids)
+        added = self.store.add(keys, limit, want_ids, grow=False)  # (see `settle`)
         first = added.first
         if first.size and self.stop_when is not None:
             new = self.successor_cols(cols, src.take(first), trans.take(first))
@@ -1858,6 +1858,8 @@ class _Explorer:
                 self.step(cols, part, base + c)
                 if self.stopped:
                     raise BudgetExceeded(self.stopped)
+                del cols, part
+                self.store.settle()  # (the step's temporaries are freed: see narrow_round)
                 c += size
                 self.check_time(self.store.size - base - c)
             base += width
@@ -2002,7 +2004,7 @@ class _Explorer:
         self.guard_insert(spec.total)
         keys, new_cols, counts = spec.joined()
         limit = None if self.max_states is None else self.max_states - self.store.size
-        added = self.store.add(keys, limit)
+        added = self.store.add(keys, limit, grow=False)  # (grown below, see `settle`)
         del keys
         first, start = added.first, added.start
         cut = np.searchsorted(first, spec.ends)  # (the levels' layers, before anything can stop)
@@ -2022,7 +2024,13 @@ class _Explorer:
         if added.cut:
             self.stopped = work_limit_reason(self.max_states or 0, "state")
             raise BudgetExceeded(self.stopped)
-        frontier = new[:, expanded:]
+        frontier = np.ascontiguousarray(new[:, expanded:])
+        del new, enables, counts
+        # The table grows now, if the round filled it, when the round's candidates are
+        # freed: its rebuild's temporaries (a chunk of keys, their hashes and slots)
+        # no longer add to theirs, which set the heap's high-water mark on deep, narrow
+        # searches (DoubleExponent-PT-003: 2.6 MB of each).
+        self.store.settle()
         self.check_time(frontier.shape[1])
         return frontier, start + expanded
 

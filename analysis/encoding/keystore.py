@@ -828,13 +828,23 @@ class KeyStore:
         found: BoolArray = self.find(cand) >= 0
         return found
 
-    def add(self, cand: KeyArray, limit: int | None = None, want_ids: bool = False) -> Added:
+    def add(
+        self,
+        cand: KeyArray,
+        limit: int | None = None,
+        want_ids: bool = False,
+        grow: bool = True,
+    ) -> Added:
         """Store the candidate keys not seen before; the batch may repeat keys.
 
         Args:
             cand: candidate keys, shape ``(m, n_words)``.
             limit: store at most this many new states (the budget left).
             want_ids: also return every candidate's state number.
+            grow: grow the table after the batch if it is past `MAX_LOAD`; false
+                leaves that to `settle`, which the caller calls once the batch's
+                other arrays are freed (a growth's temporaries then do not come on
+                top of them). Until then the table stays below `BATCH_LOAD`.
 
         Returns:
             An `Added` record; the new states are numbered ``size_before, ...`` in
@@ -861,12 +871,18 @@ class KeyStore:
             if piece_ids is not None:
                 ids.append(piece_ids)
             done += min(room, m - done)
-            self._reserve(self.size, MAX_LOAD)
+            if grow or done < m:
+                self._reserve(self.size, MAX_LOAD)
         first = np.concatenate(firsts) if firsts else np.zeros(0, dtype=np.int64)
         all_ids = np.concatenate(ids) if want_ids and ids else None
         if want_ids and all_ids is None:
             all_ids = np.zeros(0, dtype=np.int64)
         return Added(first, start, False, all_ids)
+
+    def settle(self) -> None:
+        """Grow the table if a batch added with ``grow=False`` left it past
+        `MAX_LOAD`."""
+        self._reserve(self.size, MAX_LOAD)
 
     def _claim(
         self, cand: KeyArray, parts: KeyParts, want_ids: bool

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given, settings
 
-from analysis.encoding import MAX_LOAD, KeyStore
+from analysis.encoding import BATCH_LOAD, MAX_LOAD, KeyStore
 from analysis.encoding.keystore import GROWTH
 from analysis.statespace import explore
 from coral_lang.net import Net
@@ -31,6 +31,25 @@ def test_table_costs_at_most_three_bytes_per_slot_at_the_lowest_load() -> None:
     assert max(b / a for a, b in zip(sorted(slots), sorted(slots)[1:], strict=False)) < 1.6
     ids = store.find(store.keys[::-1])
     assert ids.tolist() == list(range(store.size - 1, -1, -1))
+
+
+def test_growth_put_off_until_settle_keeps_the_batch_load_and_every_number() -> None:
+    rng = np.random.default_rng(12)
+    eager, lazy = KeyStore(2, capacity=16), KeyStore(2, capacity=16)
+    past = 0
+    for _ in range(60):
+        batch = rng.integers(0, 1 << 40, size=(700, 2), dtype=np.int64).astype(np.uint64)
+        batch[::7] = batch[1::7][: batch[::7].shape[0]]  # repeats within the batch
+        one = eager.add(batch)
+        other = lazy.add(batch, grow=False)
+        assert one.first.tolist() == other.first.tolist() and one.start == other.start
+        slots = (lazy.nbytes - lazy.keys.nbytes) // 3
+        assert lazy.size <= BATCH_LOAD * slots  # never past the batch load
+        past += lazy.size > MAX_LOAD * slots
+        lazy.settle()
+        assert lazy.size <= MAX_LOAD * ((lazy.nbytes - lazy.keys.nbytes) // 3)
+    assert past  # some batch did leave the growth to settle
+    assert lazy.find(eager.keys[:]).tolist() == list(range(eager.size))
 
 
 def test_rekey_to_wider_keys_keeps_every_number() -> None:
