@@ -444,7 +444,7 @@ class PackedRows:
             rows = self._whole.view.take(ids, axis=0)
             same_rows: BoolArray = ~_rows_differ(rows, parts[0].take(at, axis=0))
             return same_rows
-        gather = self._gatherer(ids)
+        gather = self._gatherer()
         out: BoolArray = gather(0, ids) == parts[0].take(at)
         for k in range(1, len(parts)):
             equal = int(np.count_nonzero(out))
@@ -457,9 +457,8 @@ class PackedRows:
                 out[live] = gather(k, ids.take(live)) == parts[k].take(at.take(live))
         return out
 
-    def _gatherer(self, ids: IntArray) -> Callable[[int, IntArray], npt.NDArray[Any]]:
-        """``gather(k, rows)``: compared plane ``k`` of stored ``rows`` (a subset of
-        ``ids``, or ``ids`` itself)."""
+    def _gatherer(self) -> Callable[[int, IntArray], npt.NDArray[Any]]:
+        """``gather(k, rows)``: compared plane ``k`` of stored ``rows``."""
         if not self.whole:
             compared = self._compared
             return lambda k, rows: compared[k].rows.view.take(rows)
